@@ -1,0 +1,15 @@
+//! mapc: the refloc map compiler (library half).
+//!
+//! Stages, one module each: [`mapfile`] (ROS map_server YAML + PGM/PNG),
+//! [`edt`] (exact Euclidean distance transform), [`gvd`] (generalized Voronoi
+//! diagram and its graph), [`sites`] (reference site placement and coverage).
+#![deny(missing_docs)]
+
+pub mod edt;
+pub mod gvd;
+pub mod mapfile;
+pub mod plot;
+pub mod render;
+pub mod rng;
+pub mod sites;
+pub mod synth;
