@@ -38,7 +38,11 @@ impl Pose2 {
     /// The inverse transform.
     pub fn inverse(&self) -> Pose2 {
         let (s, c) = (libm::sinf(self.theta), libm::cosf(self.theta));
-        Pose2::new(-(c * self.x + s * self.y), s * self.x - c * self.y, -self.theta)
+        Pose2::new(
+            -(c * self.x + s * self.y),
+            s * self.x - c * self.y,
+            -self.theta,
+        )
     }
 }
 

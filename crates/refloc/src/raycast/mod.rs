@@ -44,6 +44,15 @@ impl<'a> BitGrid<'a> {
         })
     }
 
+    /// A 0 x 0 grid (every ray is a "no return").
+    pub const fn empty() -> BitGrid<'static> {
+        BitGrid {
+            width: 0,
+            height: 0,
+            words: &[],
+        }
+    }
+
     /// The packed words.
     pub fn words(&self) -> &'a [u32] {
         self.words
@@ -76,7 +85,13 @@ impl Occupancy for BitGrid<'_> {
 /// Returns `None` when no blocked cell lies within `max_cells` or the ray
 /// leaves the grid first (a "no return"). A start inside a blocked cell or
 /// outside the grid returns `Some(0.0)` or `None` respectively.
-pub fn cast<G: Occupancy + ?Sized>(grid: &G, u: f32, v: f32, angle: f32, max_cells: f32) -> Option<f32> {
+pub fn cast<G: Occupancy + ?Sized>(
+    grid: &G,
+    u: f32,
+    v: f32,
+    angle: f32,
+    max_cells: f32,
+) -> Option<f32> {
     let (dy, dx) = (libm::sinf(angle), libm::cosf(angle));
     cast_dir(grid, u, v, dx, dy, max_cells)
 }
@@ -91,14 +106,23 @@ pub fn cast_dir<G: Occupancy + ?Sized>(
     max_cells: f32,
 ) -> Option<f32> {
     let mut hit = None;
-    traverse(grid.width(), grid.height(), u, v, dx, dy, max_cells, |cx, cy, t| {
-        if grid.blocked(cx, cy) {
-            hit = Some(t);
-            false
-        } else {
-            true
-        }
-    });
+    traverse(
+        grid.width(),
+        grid.height(),
+        u,
+        v,
+        dx,
+        dy,
+        max_cells,
+        |cx, cy, t| {
+            if grid.blocked(cx, cy) {
+                hit = Some(t);
+                false
+            } else {
+                true
+            }
+        },
+    );
     hit
 }
 
@@ -134,8 +158,16 @@ pub fn traverse(
     let step_y: i64 = if dy > 0.0 { 1 } else { -1 };
     // Ray parameter (cells travelled) at which the next vertical / horizontal
     // cell boundary is crossed, and the increment between successive ones.
-    let t_delta_x = if dx != 0.0 { libm::fabsf(1.0 / dx) } else { f32::INFINITY };
-    let t_delta_y = if dy != 0.0 { libm::fabsf(1.0 / dy) } else { f32::INFINITY };
+    let t_delta_x = if dx != 0.0 {
+        libm::fabsf(1.0 / dx)
+    } else {
+        f32::INFINITY
+    };
+    let t_delta_y = if dy != 0.0 {
+        libm::fabsf(1.0 / dy)
+    } else {
+        f32::INFINITY
+    };
     let mut t_max_x = if dx > 0.0 {
         ((cx + 1) as f32 - u) * t_delta_x
     } else if dx < 0.0 {

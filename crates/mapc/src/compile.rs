@@ -1,0 +1,207 @@
+//! Assembling a `.refdb` from a placed map: reference scans (ray cast with
+//! `refloc::raycast`), PGR histograms (`refloc::pgr`, the runtime's own
+//! function), the beam grid, the distance map, the logistic weights fitted
+//! on the map's own simulated scans, and the build manifest.
+
+use rayon::prelude::*;
+use refloc::format::{MetaRecord, SectionKind, SiteRecord, DIST_STEPS_PER_CELL};
+use refloc::params::Params;
+use refloc::raycast::BitGrid;
+use refloc::{pgr, prep, MapFrame, Pose2};
+use zerocopy::little_endian::{F32, U32, U64};
+use zerocopy::IntoBytes;
+
+use crate::fit::{self, FitReport};
+use crate::sim::{self, Lidar};
+
+/// A reference site as the compiler hands it to the database.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SiteIn {
+    /// Map-frame position (m).
+    pub x: f64,
+    /// Map-frame position (m).
+    pub y: f64,
+    /// Distance to the nearest obstacle (m).
+    pub clearance: f64,
+    /// 0 vertex, 1 end point, 2 edge, 3 fill.
+    pub kind: u32,
+    /// Graph neighbours (site indices).
+    pub neighbours: Vec<u32>,
+}
+
+/// Everything the database is built from besides the sites.
+pub struct CompileInput<'a> {
+    /// Grid width (cells).
+    pub width: u32,
+    /// Grid height (cells).
+    pub height: u32,
+    /// Grid placement.
+    pub frame: MapFrame,
+    /// Packed beam-stopping bits (see `refloc::raycast::BitGrid`).
+    pub blocked: &'a [u32],
+    /// Squared distance (cells^2) from each cell centre to the nearest
+    /// beam-stopping cell centre.
+    pub sq_dist: &'a [f32],
+    /// Whether unknown cells stop beams.
+    pub unknown_blocks: bool,
+    /// Free cells in the source map.
+    pub free_cells: u64,
+    /// Runtime parameters (the logistic weights are replaced by the fit unless `fit_queries` is 0).
+    pub params: Params,
+    /// Simulated queries for the logistic fit (0: keep `params.w`).
+    pub fit_queries: usize,
+    /// Seed of the fit.
+    pub fit_seed: u64,
+}
+
+/// The result of compilation.
+pub struct Compiled {
+    /// The section bytes, in file order.
+    pub sections: Vec<(SectionKind, Vec<u8>)>,
+    /// Parameters as stored.
+    pub params: Params,
+    /// Reference scans (m), per site.
+    pub scans: Vec<Vec<f32>>,
+    /// Logistic fit report.
+    pub fit: FitReport,
+}
+
+/// The reference sensor of a database.
+pub fn ref_lidar(params: &Params) -> Lidar {
+    let s = &params.sensor;
+    Lidar {
+        beams: s.beams as usize,
+        angle_min: s.angle_min,
+        angle_increment: s.angle_increment,
+        range_min: s.range_min,
+        range_max: s.range_max,
+    }
+}
+
+/// Reference scan ranges of every site (m; `INFINITY` for no return). The
+/// sensor sits on the site, heading along the map's +x axis.
+pub fn reference_scans(grid: &BitGrid<'_>, frame: &MapFrame, sites: &[SiteIn], params: &Params) -> Vec<Vec<f32>> {
+    let lidar = ref_lidar(params);
+    sites
+        .par_iter()
+        .map(|s| sim::virtual_scan(grid, frame, &Pose2::new(s.x as f32, s.y as f32, 0.0), &lidar))
+        .collect()
+}
+
+/// PGR histogram of a range scan taken with the reference sensor.
+pub fn scan_histogram(ranges: &[f32], params: &Params) -> Vec<f32> {
+    let s = &params.sensor;
+    let mut dense = vec![[0f32; 2]; ranges.len()];
+    let n = prep::ranges_to_points(ranges, s.angle_min, s.angle_increment, s.range_min, s.range_max, &mut dense);
+    let p = params.max_points as usize;
+    let (mut pts, mut tan) = (vec![[0f32; 2]; p], vec![[0f32; 2]; p]);
+    let wrap = s.angle_increment * s.beams as f32 >= 2.0 * std::f32::consts::PI - 1.5 * s.angle_increment;
+    let m = prep::prepare(&dense[..n], wrap, params, &mut pts, &mut tan);
+    let mut h = vec![0f32; params.hist_cells()];
+    pgr::histogram(&pts[..m], &tan[..m], params, &mut h);
+    h
+}
+
+/// The quantized distance map: distance from each cell centre to the nearest
+/// obstacle *surface* (centre distance minus half a cell), in
+/// `resolution / DIST_STEPS_PER_CELL` units, saturating at 255.
+pub fn dist_section(sq_dist: &[f32]) -> Vec<u8> {
+    sq_dist
+        .iter()
+        .map(|&d2| {
+            let d = (d2.max(0.0).sqrt() - 0.5).max(0.0);
+            (d * DIST_STEPS_PER_CELL).round().min(255.0) as u8
+        })
+        .collect()
+}
+
+/// Compiles everything but the manifest, which the caller appends.
+pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, String> {
+    let mut params = input.params;
+    params.validate().map_err(|f| format!("invalid parameter: {f}"))?;
+    if sites.is_empty() {
+        return Err("no reference sites: the map has no free space wide enough for the robot".into());
+    }
+    let grid = BitGrid::new(input.width, input.height, input.blocked).ok_or("grid bits shorter than the grid")?;
+    let frame = input.frame;
+    let scans = reference_scans(&grid, &frame, sites, &params);
+    // Logistic weights from the map's own simulated scans.
+    let res = frame.resolution;
+    let (w, h) = (input.width as i64, input.height as i64);
+    let sq = input.sq_dist;
+    let clearance_ok = move |p: [f32; 2]| {
+        let uv = frame.to_cells(p);
+        let (cx, cy) = (uv[0].floor() as i64, uv[1].floor() as i64);
+        if cx < 0 || cy < 0 || cx >= w || cy >= h {
+            return false;
+        }
+        let d = sq[(cy * w + cx) as usize].sqrt() * res;
+        d >= 0.25
+    };
+    let site_xy: Vec<[f32; 2]> = sites.iter().map(|s| [s.x as f32, s.y as f32]).collect();
+    let fit = if input.fit_queries > 0 {
+        fit::fit_weights(&grid, &frame, &clearance_ok, &site_xy, &scans, &params, input.fit_queries, input.fit_seed)
+    } else {
+        FitReport {
+            queries: 0,
+            samples: 0,
+            positives: 0,
+            w: params.w,
+            seed: input.fit_seed,
+        }
+    };
+    params.w = fit.w;
+    params.validate().map_err(|f| format!("invalid fitted parameter: {f}"))?;
+    let hists: Vec<Vec<f32>> = scans.par_iter().map(|s| scan_histogram(s, &params)).collect();
+
+    let meta = MetaRecord {
+        width: U32::new(input.width),
+        height: U32::new(input.height),
+        resolution: F32::new(frame.resolution),
+        origin_x: F32::new(frame.origin.x),
+        origin_y: F32::new(frame.origin.y),
+        origin_yaw: F32::new(frame.origin.theta),
+        site_count: U32::new(sites.len() as u32),
+        unknown_blocks: U32::new(input.unknown_blocks as u32),
+        free_cells: U64::new(input.free_cells),
+        reserved: [0; 24],
+    };
+    let mut neighbours: Vec<u32> = Vec::new();
+    let site_records: Vec<SiteRecord> = sites
+        .iter()
+        .map(|s| {
+            let start = neighbours.len() as u32;
+            neighbours.extend(s.neighbours.iter().copied().filter(|&n| (n as usize) < sites.len()));
+            SiteRecord {
+                x: F32::new(s.x as f32),
+                y: F32::new(s.y as f32),
+                clearance: F32::new(s.clearance as f32),
+                kind: U32::new(s.kind),
+                neighbor_start: U32::new(start),
+                neighbor_count: U32::new(neighbours.len() as u32 - start),
+            }
+        })
+        .collect();
+    let scan_bytes: Vec<u8> = scans.iter().flat_map(|s| s.iter().flat_map(|v| v.to_le_bytes())).collect();
+    let hist_bytes: Vec<u8> = hists.iter().flat_map(|s| s.iter().flat_map(|v| v.to_le_bytes())).collect();
+    let grid_bytes: Vec<u8> = input.blocked[..BitGrid::words_for(input.width, input.height)]
+        .iter()
+        .flat_map(|w| w.to_le_bytes())
+        .collect();
+    let sections = vec![
+        (SectionKind::Meta, meta.as_bytes().to_vec()),
+        (SectionKind::Params, params.to_record().as_bytes().to_vec()),
+        (SectionKind::Grid, grid_bytes),
+        (SectionKind::Dist, dist_section(input.sq_dist)),
+        (SectionKind::Sites, site_records.as_bytes().to_vec()),
+        (SectionKind::Neighbors, neighbours.iter().flat_map(|n| n.to_le_bytes()).collect()),
+        (SectionKind::Scans, scan_bytes),
+        (SectionKind::Hists, hist_bytes),
+    ];
+    Ok(Compiled {
+        sections,
+        params,
+        scans,
+        fit,
+    })
+}

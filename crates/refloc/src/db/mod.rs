@@ -1,0 +1,523 @@
+//! [`RefDb`]: a validated, zero-copy view of a `.refdb` file.
+//!
+//! [`RefDb::new`] checks the header, the section table, every bound, every
+//! alignment and every cross-section count once; after it succeeds no
+//! accessor can fail or panic. [`RefDb::verify`] additionally checks every
+//! checksum (O(file size)).
+
+use core::fmt;
+use core::ops::Range;
+
+use zerocopy::FromBytes;
+
+use crate::format::{
+    self, crc, Header, MetaRecord, ParamsRecord, SectionEntry, SectionKind, SiteRecord,
+    ENDIAN_CHECK, ENTRY_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, MAX_SECTIONS, SECTION_ALIGN,
+};
+use crate::params::Params;
+use crate::raycast::BitGrid;
+use crate::{MapFrame, Pose2};
+
+/// What is wrong with a database.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum DbErrorKind {
+    /// Shorter than its header or table, or shorter/longer than the header says.
+    Truncated,
+    /// The first bytes are not `REFLOCDB`.
+    Magic,
+    /// Written with the other byte order.
+    Endian,
+    /// A format version this reader does not read.
+    Version,
+    /// The header's own checksum does not match.
+    HeaderChecksum,
+    /// A section's checksum does not match (from `verify`).
+    SectionChecksum,
+    /// The section table is malformed (count, unknown or duplicate kind).
+    Table,
+    /// A section lies outside the file or its offset/length overflows.
+    OutOfBounds,
+    /// A section is not aligned to the format's alignment.
+    Alignment,
+    /// Two sections overlap.
+    Overlap,
+    /// A required section is missing.
+    Missing,
+    /// A section's length disagrees with the counts in other sections.
+    Size,
+    /// A value is out of its valid range.
+    Value,
+    /// This target is big-endian; the format's arrays are little-endian.
+    HostEndian,
+}
+
+/// A database error: what, where, and the expected/found values if any.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DbError {
+    /// The kind of problem.
+    pub kind: DbErrorKind,
+    /// Where: a section name, a field name, or "header".
+    pub context: &'static str,
+    /// Expected value, when meaningful.
+    pub expected: u64,
+    /// Found value, when meaningful.
+    pub found: u64,
+}
+
+impl DbError {
+    const fn new(kind: DbErrorKind, context: &'static str, expected: u64, found: u64) -> Self {
+        DbError {
+            kind,
+            context,
+            expected,
+            found,
+        }
+    }
+}
+
+impl fmt::Display for DbError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        use DbErrorKind::*;
+        let (e, g, c) = (self.expected, self.found, self.context);
+        match self.kind {
+            Truncated => write!(f, "truncated or padded file: {c} needs {e} bytes, found {g}"),
+            Magic => write!(f, "not a .refdb file: the first 8 bytes are not 'REFLOCDB'"),
+            Endian => write!(f, "byte order mismatch: endianness check is {g:#06x}, expected {e:#06x}"),
+            Version => write!(
+                f,
+                "format version {g} is not supported: this reader reads version {e}; rebuild the map with a matching `mapc build`"
+            ),
+            HeaderChecksum => write!(f, "header checksum mismatch: expected {e:#010x}, computed {g:#010x}"),
+            SectionChecksum => write!(f, "checksum mismatch in section '{c}': stored {e:#010x}, computed {g:#010x}"),
+            Table => write!(f, "malformed section table: {c} (value {g})"),
+            OutOfBounds => write!(f, "section '{c}' ends at byte {g}, past the end of the file ({e} bytes)"),
+            Alignment => write!(f, "section '{c}' starts at byte {g}, not a multiple of {e}"),
+            Overlap => write!(f, "section '{c}' overlaps another section at byte {g}"),
+            Missing => write!(f, "required section '{c}' is missing"),
+            Size => write!(f, "section '{c}' has {g} bytes, expected {e}"),
+            Value => write!(f, "invalid value in {c} (found {g})"),
+            HostEndian => write!(f, "this build runs on a big-endian target; .refdb arrays are little-endian"),
+        }
+    }
+}
+
+impl core::error::Error for DbError {}
+
+const N_KINDS: usize = SectionKind::ALL.len();
+
+/// A validated reference database over any byte container (`&[u8]`,
+/// `Vec<u8>`, an `Mmap`, a `&'static [u8]` in flash).
+pub struct RefDb<D: AsRef<[u8]>> {
+    data: D,
+    sections: [Range<usize>; N_KINDS],
+    crcs: [u32; N_KINDS],
+    meta: MetaRecord,
+    params: Params,
+    frame: MapFrame,
+    site_count: usize,
+}
+
+fn kind_index(k: SectionKind) -> usize {
+    k as usize - 1
+}
+
+impl<D: AsRef<[u8]>> RefDb<D> {
+    /// Checks structure, bounds, alignment and counts; no checksums (see
+    /// [`RefDb::verify`]). Never panics, never allocates.
+    pub fn new(data: D) -> Result<Self, DbError> {
+        let (sections, crcs, meta, params) = parse(data.as_ref())?;
+        let frame = MapFrame {
+            resolution: meta.resolution.get(),
+            origin: Pose2 {
+                x: meta.origin_x.get(),
+                y: meta.origin_y.get(),
+                theta: meta.origin_yaw.get(),
+            },
+        };
+        let site_count = meta.site_count.get() as usize;
+        Ok(RefDb {
+            data,
+            sections,
+            crcs,
+            meta,
+            params,
+            frame,
+            site_count,
+        })
+    }
+
+    /// Checks every section's CRC-32C. O(file size).
+    pub fn verify(&self) -> Result<(), DbError> {
+        for k in SectionKind::ALL {
+            let got = crc::crc32c(self.section(k));
+            let want = self.crcs[kind_index(k)];
+            if got != want {
+                return Err(DbError::new(
+                    DbErrorKind::SectionChecksum,
+                    k.name(),
+                    want as u64,
+                    got as u64,
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The whole file.
+    pub fn bytes(&self) -> &[u8] {
+        self.data.as_ref()
+    }
+
+    /// The bytes of one section (empty if absent).
+    pub fn section(&self, kind: SectionKind) -> &[u8] {
+        self.data
+            .as_ref()
+            .get(self.sections[kind_index(kind)].clone())
+            .unwrap_or(&[])
+    }
+
+    /// The stored checksum of one section.
+    pub fn section_crc(&self, kind: SectionKind) -> u32 {
+        self.crcs[kind_index(kind)]
+    }
+
+    /// Runtime parameters.
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    /// Map metadata record.
+    pub fn meta(&self) -> &MetaRecord {
+        &self.meta
+    }
+
+    /// Grid placement in the map frame.
+    pub fn frame(&self) -> MapFrame {
+        self.frame
+    }
+
+    /// Grid width and height in cells.
+    pub fn grid_size(&self) -> (u32, u32) {
+        (self.meta.width.get(), self.meta.height.get())
+    }
+
+    /// The beam-stopping grid.
+    pub fn grid(&self) -> BitGrid<'_> {
+        let (w, h) = self.grid_size();
+        let words = <[u32]>::ref_from_bytes(self.section(SectionKind::Grid)).unwrap_or(&[]);
+        BitGrid::new(w, h, words).unwrap_or(BitGrid::empty())
+    }
+
+    /// Quantized distance map, one byte per cell (see [`format::DIST_STEPS_PER_CELL`]).
+    pub fn dist(&self) -> &[u8] {
+        self.section(SectionKind::Dist)
+    }
+
+    /// Number of reference sites.
+    pub fn site_count(&self) -> usize {
+        self.site_count
+    }
+
+    /// All site records.
+    pub fn sites(&self) -> &[SiteRecord] {
+        <[SiteRecord]>::ref_from_bytes(self.section(SectionKind::Sites)).unwrap_or(&[])
+    }
+
+    /// Site `i` (`None` past the end).
+    pub fn site(&self, i: usize) -> Option<&SiteRecord> {
+        self.sites().get(i)
+    }
+
+    /// Map-frame position of site `i` (m), `[0, 0]` past the end.
+    pub fn site_xy(&self, i: usize) -> [f32; 2] {
+        self.site(i)
+            .map(|s| [s.x.get(), s.y.get()])
+            .unwrap_or([0.0, 0.0])
+    }
+
+    /// Graph neighbours of site `i`.
+    pub fn neighbors(&self, i: usize) -> &[u32] {
+        let all = <[u32]>::ref_from_bytes(self.section(SectionKind::Neighbors)).unwrap_or(&[]);
+        match self.site(i) {
+            Some(s) => {
+                let a = s.neighbor_start.get() as usize;
+                let n = s.neighbor_count.get() as usize;
+                all.get(a..a.saturating_add(n)).unwrap_or(&[])
+            }
+            None => &[],
+        }
+    }
+
+    /// Reference scan ranges of site `i` (m; `INFINITY` for no return).
+    pub fn scan(&self, i: usize) -> &[f32] {
+        let all = <[f32]>::ref_from_bytes(self.section(SectionKind::Scans)).unwrap_or(&[]);
+        let b = self.params.sensor.beams as usize;
+        all.get(i.saturating_mul(b)..i.saturating_add(1).saturating_mul(b))
+            .unwrap_or(&[])
+    }
+
+    /// PGR histogram of site `i` (normalized to sum 1).
+    pub fn hist(&self, i: usize) -> &[f32] {
+        let all = <[f32]>::ref_from_bytes(self.section(SectionKind::Hists)).unwrap_or(&[]);
+        let k = self.params.hist_cells();
+        all.get(i.saturating_mul(k)..i.saturating_add(1).saturating_mul(k))
+            .unwrap_or(&[])
+    }
+
+    /// The build manifest (UTF-8 JSON written by mapc; may be empty).
+    pub fn manifest(&self) -> &str {
+        core::str::from_utf8(self.section(SectionKind::Manifest)).unwrap_or("")
+    }
+}
+
+type Parsed = ([Range<usize>; N_KINDS], [u32; N_KINDS], MetaRecord, Params);
+
+fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
+    use DbErrorKind::*;
+    if cfg!(target_endian = "big") {
+        return Err(DbError::new(HostEndian, "host", 0, 0));
+    }
+    let len = bytes.len();
+    if len < 8 || bytes[..8] != MAGIC {
+        if len < 8 && MAGIC.starts_with(bytes) {
+            return Err(DbError::new(
+                Truncated,
+                "header",
+                HEADER_LEN as u64,
+                len as u64,
+            ));
+        }
+        return Err(DbError::new(Magic, "header", 0, 0));
+    }
+    let (header, _) = Header::read_from_prefix(bytes)
+        .map_err(|_| DbError::new(Truncated, "header", HEADER_LEN as u64, len as u64))?;
+    let endian = header.endian.get();
+    if endian != ENDIAN_CHECK {
+        return Err(DbError::new(
+            Endian,
+            "header",
+            ENDIAN_CHECK as u64,
+            endian as u64,
+        ));
+    }
+    let version = header.version.get();
+    if version != FORMAT_VERSION {
+        return Err(DbError::new(
+            Version,
+            "header",
+            FORMAT_VERSION as u64,
+            version as u64,
+        ));
+    }
+    if header.header_len.get() as usize != HEADER_LEN {
+        return Err(DbError::new(
+            Table,
+            "header length",
+            HEADER_LEN as u64,
+            header.header_len.get() as u64,
+        ));
+    }
+    let count = header.section_count.get() as usize;
+    if count == 0 || count > MAX_SECTIONS {
+        return Err(DbError::new(
+            Table,
+            "section count",
+            MAX_SECTIONS as u64,
+            count as u64,
+        ));
+    }
+    let table_end = HEADER_LEN + count * ENTRY_LEN;
+    let table_bytes = bytes.get(HEADER_LEN..table_end).ok_or(DbError::new(
+        Truncated,
+        "section table",
+        table_end as u64,
+        len as u64,
+    ))?;
+    let stored_crc = header.header_crc.get();
+    let computed = format::header_crc(&header, table_bytes);
+    if stored_crc != computed {
+        return Err(DbError::new(
+            HeaderChecksum,
+            "header",
+            stored_crc as u64,
+            computed as u64,
+        ));
+    }
+    if header.file_len.get() != len as u64 {
+        return Err(DbError::new(
+            Truncated,
+            "file",
+            header.file_len.get(),
+            len as u64,
+        ));
+    }
+    let table = <[SectionEntry]>::ref_from_bytes(table_bytes)
+        .map_err(|_| DbError::new(Table, "section table", 0, 0))?;
+
+    let mut sections: [Range<usize>; N_KINDS] = Default::default();
+    let mut present = [false; N_KINDS];
+    let mut crcs = [0u32; N_KINDS];
+    let mut spans: [(usize, usize); MAX_SECTIONS] = [(0, 0); MAX_SECTIONS];
+    for (n, e) in table.iter().enumerate() {
+        let raw = e.kind.get();
+        let kind = SectionKind::from_u32(raw).ok_or(DbError::new(
+            Table,
+            "unknown section kind",
+            0,
+            raw as u64,
+        ))?;
+        let ki = kind_index(kind);
+        if present[ki] {
+            return Err(DbError::new(Table, "duplicate section kind", 0, raw as u64));
+        }
+        let off = e.offset.get();
+        let slen = e.len.get();
+        let end = off.checked_add(slen).ok_or(DbError::new(
+            OutOfBounds,
+            kind.name(),
+            len as u64,
+            u64::MAX,
+        ))?;
+        if end > len as u64 {
+            return Err(DbError::new(OutOfBounds, kind.name(), len as u64, end));
+        }
+        if off % SECTION_ALIGN as u64 != 0 {
+            return Err(DbError::new(
+                Alignment,
+                kind.name(),
+                SECTION_ALIGN as u64,
+                off,
+            ));
+        }
+        if off < table_end as u64 {
+            return Err(DbError::new(Overlap, kind.name(), table_end as u64, off));
+        }
+        let (off, end) = (off as usize, end as usize);
+        for &(a, b) in &spans[..n] {
+            if off < b && a < end && slen > 0 && b > a {
+                return Err(DbError::new(Overlap, kind.name(), 0, off as u64));
+            }
+        }
+        spans[n] = (off, end);
+        present[ki] = true;
+        sections[ki] = off..end;
+        crcs[ki] = e.crc.get();
+    }
+    for k in SectionKind::ALL {
+        if !present[kind_index(k)] {
+            return Err(DbError::new(Missing, k.name(), 0, 0));
+        }
+    }
+    let sec = |k: SectionKind| &bytes[sections[kind_index(k)].clone()];
+    let exact = |k: SectionKind, want: usize| {
+        let got = sec(k).len();
+        if got == want {
+            Ok(())
+        } else {
+            Err(DbError::new(Size, k.name(), want as u64, got as u64))
+        }
+    };
+    exact(SectionKind::Meta, core::mem::size_of::<MetaRecord>())?;
+    exact(SectionKind::Params, core::mem::size_of::<ParamsRecord>())?;
+    let meta = MetaRecord::read_from_bytes(sec(SectionKind::Meta))
+        .map_err(|_| DbError::new(Size, "meta", 0, 0))?;
+    let pr = ParamsRecord::read_from_bytes(sec(SectionKind::Params))
+        .map_err(|_| DbError::new(Size, "params", 0, 0))?;
+    let params = Params::from_record(&pr).map_err(|f| DbError::new(Value, f, 0, 0))?;
+    params
+        .validate()
+        .map_err(|f| DbError::new(Value, f, 0, 0))?;
+
+    let (w, h) = (meta.width.get() as usize, meta.height.get() as usize);
+    if w == 0 || h == 0 {
+        return Err(DbError::new(Value, "grid size", 1, 0));
+    }
+    let res = meta.resolution.get();
+    if !(res.is_finite() && res > 0.0) {
+        return Err(DbError::new(Value, "resolution", 0, res.to_bits() as u64));
+    }
+    if !(meta.origin_x.get().is_finite()
+        && meta.origin_y.get().is_finite()
+        && meta.origin_yaw.get().is_finite())
+    {
+        return Err(DbError::new(Value, "origin", 0, 0));
+    }
+    // Sizes computed in u64/u128 so absurd dimensions cannot overflow; the
+    // comparison with the real section length bounds everything.
+    let cells = (w as u64) * (h as u64);
+    exact(
+        SectionKind::Grid,
+        (cells.div_ceil(32) * 4).min(usize::MAX as u64) as usize,
+    )?;
+    exact(SectionKind::Dist, cells.min(usize::MAX as u64) as usize)?;
+    let n_sites = meta.site_count.get() as u64;
+    if n_sites == 0 {
+        return Err(DbError::new(Value, "site count", 1, 0));
+    }
+    let sz = |n: u64, each: u64| (n as u128 * each as u128).min(usize::MAX as u128) as usize;
+    exact(
+        SectionKind::Sites,
+        sz(n_sites, core::mem::size_of::<SiteRecord>() as u64),
+    )?;
+    exact(
+        SectionKind::Scans,
+        sz(n_sites, params.sensor.beams as u64 * 4),
+    )?;
+    exact(
+        SectionKind::Hists,
+        sz(n_sites, params.hist_cells() as u64 * 4),
+    )?;
+    let nb_len = sec(SectionKind::Neighbors).len();
+    if nb_len % 4 != 0 {
+        return Err(DbError::new(
+            Size,
+            "neighbors",
+            (nb_len - nb_len % 4) as u64,
+            nb_len as u64,
+        ));
+    }
+    let nb = <[u32]>::ref_from_bytes(sec(SectionKind::Neighbors))
+        .map_err(|_| DbError::new(Alignment, "neighbors", 4, 0))?;
+    if nb.iter().any(|&v| v as u64 >= n_sites) {
+        return Err(DbError::new(Value, "neighbor index", n_sites, 0));
+    }
+    let sites = <[SiteRecord]>::ref_from_bytes(sec(SectionKind::Sites))
+        .map_err(|_| DbError::new(Size, "sites", 0, 0))?;
+    for s in sites {
+        let (a, n) = (s.neighbor_start.get() as u64, s.neighbor_count.get() as u64);
+        if a + n > nb.len() as u64 {
+            return Err(DbError::new(
+                OutOfBounds,
+                "site neighbours",
+                nb.len() as u64,
+                a + n,
+            ));
+        }
+        if !(s.x.get().is_finite() && s.y.get().is_finite() && s.clearance.get().is_finite()) {
+            return Err(DbError::new(Value, "site position", 0, 0));
+        }
+    }
+    // Arrays read in place must be aligned in memory too (the container may
+    // not start on an aligned address).
+    for k in [
+        SectionKind::Grid,
+        SectionKind::Scans,
+        SectionKind::Hists,
+        SectionKind::Neighbors,
+    ] {
+        let s = sec(k);
+        if <[u32]>::ref_from_bytes(s).is_err() {
+            return Err(DbError::new(
+                Alignment,
+                k.name(),
+                4,
+                s.as_ptr() as usize as u64 % 4,
+            ));
+        }
+    }
+    Ok((sections, crcs, meta, params))
+}
+
+#[cfg(test)]
+mod tests;

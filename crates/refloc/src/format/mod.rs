@@ -1,0 +1,344 @@
+//! The `.refdb` on-disk layout (see `docs/format.md`), and its encoder.
+//!
+//! Everything is little-endian. The file is a 64-byte [`Header`], a table of
+//! [`SectionEntry`] records, then the sections, each starting on a
+//! [`SECTION_ALIGN`]-byte boundary so hot `f32`/`u32` arrays can be borrowed in
+//! place. Records use zerocopy's unaligned little-endian field types; bulk
+//! arrays are plain `f32`/`u32`/`u8` read in place on little-endian targets.
+//!
+//! The on-disk structs here are a compatibility boundary: they are never used
+//! as in-memory working types, and any change to them bumps [`FORMAT_VERSION`].
+
+pub mod crc;
+
+use zerocopy::little_endian::{F32, U16, U32, U64};
+use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
+
+/// The first 8 bytes of every `.refdb` file.
+pub const MAGIC: [u8; 8] = *b"REFLOCDB";
+
+/// Written as a little-endian `u16`; a reader that sees `0xFFFE` is reading a
+/// file with the other byte order.
+pub const ENDIAN_CHECK: u16 = 0xFEFF;
+
+/// The layout version this crate reads and writes.
+///
+/// Version policy: a reader accepts exactly its own version. A file with an
+/// older or newer version is rejected with [`crate::DbErrorKind::Version`],
+/// whose message says which version was found and which is expected, so the
+/// user knows to rebuild the map with a matching `mapc` (the `.refdb` is a
+/// build artifact, always reproducible from the map and the options recorded
+/// in its manifest). Golden files of every released version live in
+/// `tests/golden/` and the test suite checks that each is either read or
+/// rejected with that message. Any change to a record or section layout
+/// bumps this number.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Every section starts at a multiple of this many bytes.
+pub const SECTION_ALIGN: usize = 16;
+
+/// At most this many sections in a table (bounds the reader's work).
+pub const MAX_SECTIONS: usize = 32;
+
+/// Size of [`Header`] in bytes.
+pub const HEADER_LEN: usize = 64;
+
+/// Size of a [`SectionEntry`] in bytes.
+pub const ENTRY_LEN: usize = 32;
+
+/// The file header.
+#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[repr(C)]
+pub struct Header {
+    /// [`MAGIC`].
+    pub magic: [u8; 8],
+    /// [`ENDIAN_CHECK`].
+    pub endian: U16,
+    /// [`HEADER_LEN`].
+    pub header_len: U16,
+    /// [`FORMAT_VERSION`].
+    pub version: U32,
+    /// Reserved flags, 0.
+    pub flags: U32,
+    /// Number of entries in the section table.
+    pub section_count: U32,
+    /// Total file length in bytes (detects truncation and appended bytes).
+    pub file_len: U64,
+    /// CRC-32C of the header (with this field zero) and the section table.
+    pub header_crc: U32,
+    /// Zero.
+    pub reserved: [u8; 28],
+}
+
+/// One entry of the section table.
+#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[repr(C)]
+pub struct SectionEntry {
+    /// A [`SectionKind`] value.
+    pub kind: U32,
+    /// Reserved, 0.
+    pub flags: U32,
+    /// Byte offset from the start of the file (multiple of [`SECTION_ALIGN`]).
+    pub offset: U64,
+    /// Length in bytes.
+    pub len: U64,
+    /// CRC-32C of the section's bytes (checked by `RefDb::verify`).
+    pub crc: U32,
+    /// Zero.
+    pub reserved: U32,
+}
+
+/// Section kinds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum SectionKind {
+    /// One [`MetaRecord`].
+    Meta = 1,
+    /// One [`ParamsRecord`].
+    Params = 2,
+    /// Packed beam-stopping bits, `u32` words (see `raycast::BitGrid`).
+    Grid = 3,
+    /// Distance to the nearest obstacle surface per cell, `u8`, unit
+    /// `resolution / DIST_STEPS_PER_CELL`, saturating at 255.
+    Dist = 4,
+    /// `site_count` [`SiteRecord`]s.
+    Sites = 5,
+    /// Neighbour site indices (`u32`), sliced by each site's record.
+    Neighbors = 6,
+    /// Reference scans: `site_count * beams` ranges (`f32`, metres; no return
+    /// is stored as `f32::INFINITY`).
+    Scans = 7,
+    /// PGR histograms: `site_count * (rho_bins * theta_bins)` `f32`, each
+    /// histogram normalized to sum 1.
+    Hists = 8,
+    /// Build manifest: UTF-8 JSON written by `mapc` (input hashes, options,
+    /// version). Informational; the runtime never parses it.
+    Manifest = 9,
+}
+
+impl SectionKind {
+    /// All kinds, in file order.
+    pub const ALL: [SectionKind; 9] = [
+        SectionKind::Meta,
+        SectionKind::Params,
+        SectionKind::Grid,
+        SectionKind::Dist,
+        SectionKind::Sites,
+        SectionKind::Neighbors,
+        SectionKind::Scans,
+        SectionKind::Hists,
+        SectionKind::Manifest,
+    ];
+
+    /// From the raw value, if known.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        Self::ALL.iter().copied().find(|k| *k as u32 == v)
+    }
+
+    /// A short lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            SectionKind::Meta => "meta",
+            SectionKind::Params => "params",
+            SectionKind::Grid => "grid",
+            SectionKind::Dist => "dist",
+            SectionKind::Sites => "sites",
+            SectionKind::Neighbors => "neighbors",
+            SectionKind::Scans => "scans",
+            SectionKind::Hists => "hists",
+            SectionKind::Manifest => "manifest",
+        }
+    }
+}
+
+/// Distance-map quantization: this many steps per grid cell.
+pub const DIST_STEPS_PER_CELL: f32 = 8.0;
+
+/// Map metadata.
+#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[repr(C)]
+pub struct MetaRecord {
+    /// Grid width in cells.
+    pub width: U32,
+    /// Grid height in cells.
+    pub height: U32,
+    /// Metres per cell.
+    pub resolution: F32,
+    /// Map-frame x of the grid's lower-left corner (m).
+    pub origin_x: F32,
+    /// Map-frame y of the grid's lower-left corner (m).
+    pub origin_y: F32,
+    /// Map-frame yaw of the grid (rad).
+    pub origin_yaw: F32,
+    /// Number of reference sites.
+    pub site_count: U32,
+    /// 1 when unknown cells stop beams in the grid section.
+    pub unknown_blocks: U32,
+    /// Free cells in the source map.
+    pub free_cells: U64,
+    /// Zero.
+    pub reserved: [u8; 24],
+}
+
+/// One reference site.
+#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[repr(C)]
+pub struct SiteRecord {
+    /// Map-frame x (m).
+    pub x: F32,
+    /// Map-frame y (m).
+    pub y: F32,
+    /// Distance to the nearest obstacle (m).
+    pub clearance: F32,
+    /// 0 GVD vertex, 1 end point, 2 on an edge, 3 coverage fill.
+    pub kind: U32,
+    /// First index into the neighbours section.
+    pub neighbor_start: U32,
+    /// Number of neighbours.
+    pub neighbor_count: U32,
+}
+
+/// Every parameter the runtime needs (units in each field's doc).
+#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[repr(C)]
+pub struct ParamsRecord {
+    /// Beams per reference scan.
+    pub beams: U32,
+    /// Angle of the first reference beam (rad, sensor frame).
+    pub angle_min: F32,
+    /// Angle between reference beams (rad).
+    pub angle_increment: F32,
+    /// Reference sensor maximum range (m).
+    pub range_max: F32,
+    /// Reference sensor minimum range (m).
+    pub range_min: F32,
+    /// Sensor mounting pose on the robot: x (m).
+    pub sensor_x: F32,
+    /// Sensor mounting pose on the robot: y (m).
+    pub sensor_y: F32,
+    /// Sensor mounting pose on the robot: yaw (rad).
+    pub sensor_theta: F32,
+    /// Scan preparation: spacing of resampled points along surfaces (m).
+    pub resample_spacing: F32,
+    /// Scan preparation: at most this many resampled points.
+    pub max_points: U32,
+    /// Scan preparation: neighbours farther apart than this are on different
+    /// surfaces (m).
+    pub jump_distance: F32,
+    /// PGR histogram: rho bins.
+    pub hist_rho_bins: U32,
+    /// PGR histogram: theta bins over (-pi, pi].
+    pub hist_theta_bins: U32,
+    /// PGR histogram: rho range upper bound (m); longer pairs go in the last bin.
+    pub hist_rho_max: F32,
+    /// Coarse: fewest candidates.
+    pub nc_min: U32,
+    /// Coarse: most candidates.
+    pub nc_max: U32,
+    /// Coarse: sites whose correlation is within this of the best are kept.
+    pub nc_margin: F32,
+    /// SSM: point descriptor radius (m).
+    pub desc_radius: F32,
+    /// SSM: tentative correspondences per input point.
+    pub tentative_k: U32,
+    /// SSM: pairs whose rho differ by more than this have zero affinity (m).
+    pub max_rho_dev: F32,
+    /// SSM: logistic weights w0 (bias), w1 (rho deviation^2, 1/m^2), w2 (theta deviation^2, 1/rad^2).
+    pub w: [F32; 3],
+    /// SSM: power iterations at most.
+    pub power_iters: U32,
+    /// SSM: binarization keeps correspondences with x >= this fraction of max x.
+    pub binarize_frac: F32,
+    /// SSM: RANSAC iterations.
+    pub ransac_iters: U32,
+    /// SSM: RANSAC inlier distance (m).
+    pub ransac_threshold: F32,
+    /// SSM: RANSAC seed.
+    pub ransac_seed: U32,
+    /// SSM: fewest inliers for a pose.
+    pub min_inliers: U32,
+    /// Refinement against the map: Gauss-Newton iterations (0 disables).
+    pub refine_iters: U32,
+    /// Refinement: points farther than this from the map are ignored (m).
+    pub refine_max_dist: F32,
+    /// Verification: sigma_d (m).
+    pub sigma_d: F32,
+    /// Verification: accept when M > 4.5 * N_P * accept_ratio (paper: 0.5).
+    pub accept_ratio: F32,
+    /// Fewest valid points in an input scan.
+    pub min_valid_points: U32,
+    /// Site selection: 0 largest matching score E (paper), 1 largest vicinity score.
+    pub selection: U32,
+    /// Zero.
+    pub reserved: [U32; 14],
+}
+
+/// The number of padding bytes that bring `len` to a multiple of [`SECTION_ALIGN`].
+pub const fn pad_len(len: usize) -> usize {
+    (SECTION_ALIGN - len % SECTION_ALIGN) % SECTION_ALIGN
+}
+
+/// Lays out a file from its sections (in the order given) and streams it to
+/// `sink`, computing every checksum on the way. Returns the file length.
+///
+/// This is the only writer of the format; `mapc` builds the section bytes and
+/// calls it.
+pub fn encode<E>(
+    sections: &[(SectionKind, &[u8])],
+    mut sink: impl FnMut(&[u8]) -> Result<(), E>,
+) -> Result<u64, E> {
+    let n = sections.len().min(MAX_SECTIONS);
+    let table_end = HEADER_LEN + n * ENTRY_LEN;
+    let mut offset = table_end + pad_len(table_end);
+    let mut entries = [SectionEntry {
+        kind: U32::new(0),
+        flags: U32::new(0),
+        offset: U64::new(0),
+        len: U64::new(0),
+        crc: U32::new(0),
+        reserved: U32::new(0),
+    }; MAX_SECTIONS];
+    for (e, (kind, bytes)) in entries.iter_mut().zip(&sections[..n]) {
+        e.kind = U32::new(*kind as u32);
+        e.offset = U64::new(offset as u64);
+        e.len = U64::new(bytes.len() as u64);
+        e.crc = U32::new(crc::crc32c(bytes));
+        offset += bytes.len() + pad_len(bytes.len());
+    }
+    let mut header = Header {
+        magic: MAGIC,
+        endian: U16::new(ENDIAN_CHECK),
+        header_len: U16::new(HEADER_LEN as u16),
+        version: U32::new(FORMAT_VERSION),
+        flags: U32::new(0),
+        section_count: U32::new(n as u32),
+        file_len: U64::new(offset as u64),
+        header_crc: U32::new(0),
+        reserved: [0; 28],
+    };
+    header.header_crc = U32::new(header_crc(&header, entries[..n].as_bytes()));
+    const ZEROS: [u8; SECTION_ALIGN] = [0; SECTION_ALIGN];
+    sink(header.as_bytes())?;
+    sink(entries[..n].as_bytes())?;
+    sink(&ZEROS[..pad_len(table_end)])?;
+    for (_, bytes) in &sections[..n] {
+        sink(bytes)?;
+        sink(&ZEROS[..pad_len(bytes.len())])?;
+    }
+    Ok(offset as u64)
+}
+
+/// CRC-32C over the header with `header_crc` zeroed, then the table bytes.
+pub fn header_crc(header: &Header, table: &[u8]) -> u32 {
+    let mut h = *header;
+    h.header_crc = U32::new(0);
+    let mut c = crc::Crc32c::new();
+    c.update(h.as_bytes());
+    c.update(table);
+    c.finish()
+}
+
+const _: () = assert!(core::mem::size_of::<Header>() == HEADER_LEN);
+const _: () = assert!(core::mem::size_of::<SectionEntry>() == ENTRY_LEN);
+const _: () = assert!(core::mem::size_of::<MetaRecord>() == 64);
+const _: () = assert!(core::mem::size_of::<SiteRecord>() == 24);

@@ -1,0 +1,69 @@
+//! Small deterministic float helpers (pure arithmetic, identical on every
+//! target, so the compiler and a robot compute bit-identical histograms).
+
+/// atan2 approximation, |error| < 1e-5 rad, result in [-pi, pi].
+#[inline]
+pub fn atan2(y: f32, x: f32) -> f32 {
+    use core::f32::consts::{FRAC_PI_2, PI};
+    let ax = libm::fabsf(x);
+    let ay = libm::fabsf(y);
+    let mx = if ax > ay { ax } else { ay };
+    if !(mx > 0.0) {
+        return 0.0;
+    }
+    let mn = if ax > ay { ay } else { ax };
+    let a = mn / mx;
+    let s = a * a;
+    // Minimax polynomial for atan on [0, 1].
+    let mut r = ((-0.013_480_470 * s + 0.057_477_314) * s - 0.121_239_071) * s;
+    r = ((r + 0.195_635_925) * s - 0.332_994_597) * s;
+    r = (r + 0.999_995_630) * a;
+    if ay > ax {
+        r = FRAC_PI_2 - r;
+    }
+    if x < 0.0 {
+        r = PI - r;
+    }
+    if y < 0.0 {
+        -r
+    } else {
+        r
+    }
+}
+
+/// Euclidean norm of a 2-vector.
+#[inline]
+pub fn norm(v: [f32; 2]) -> f32 {
+    libm::sqrtf(v[0] * v[0] + v[1] * v[1])
+}
+
+/// Squared distance.
+#[inline]
+pub fn dist2(a: [f32; 2], b: [f32; 2]) -> f32 {
+    let (dx, dy) = (a[0] - b[0], a[1] - b[1]);
+    dx * dx + dy * dy
+}
+
+/// Signed angle (radians, (-pi, pi]) from unit vector `u` to vector `d`.
+#[inline]
+pub fn signed_angle(u: [f32; 2], d: [f32; 2]) -> f32 {
+    atan2(u[0] * d[1] - u[1] * d[0], u[0] * d[0] + u[1] * d[1])
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn atan2_is_close() {
+        let mut worst = 0.0f32;
+        for i in 0..2000 {
+            let a = -3.14159 + i as f32 * 0.00314;
+            for r in [0.01f32, 1.0, 100.0] {
+                let (y, x) = (r * libm::sinf(a), r * libm::cosf(a));
+                let e = (super::atan2(y, x) - libm::atan2f(y, x)).abs();
+                worst = worst.max(e.min((e - 2.0 * core::f32::consts::PI).abs()));
+            }
+        }
+        assert!(worst < 2e-5, "worst {worst}");
+        assert_eq!(super::atan2(0.0, 0.0), 0.0);
+    }
+}

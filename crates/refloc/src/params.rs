@@ -1,0 +1,328 @@
+//! Runtime parameters: the native, validated form of
+//! [`crate::format::ParamsRecord`]. Units: metres, radians.
+
+use crate::format::ParamsRecord;
+use zerocopy::little_endian::{F32, U32};
+
+/// Most beams a reference scan may have.
+pub const MAX_REF_BEAMS: u32 = 4096;
+/// Most resampled points per scan.
+pub const MAX_POINTS: u32 = 512;
+/// Most histogram cells.
+pub const MAX_HIST_CELLS: u32 = 4096;
+/// Most candidate sites examined by the fine stage.
+pub const MAX_CANDIDATES: u32 = 256;
+/// Most tentative correspondences per input point.
+pub const MAX_TENTATIVE_K: u32 = 16;
+
+/// How the final site is chosen among the candidates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Selection {
+    /// Largest matching score E (the paper).
+    MatchScore,
+    /// Largest vicinity score M (measured improvement).
+    Vicinity,
+}
+
+/// The sensor that made the reference scans.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SensorModel {
+    /// Beams per scan.
+    pub beams: u32,
+    /// First beam angle (rad).
+    pub angle_min: f32,
+    /// Angle step (rad).
+    pub angle_increment: f32,
+    /// Minimum range (m).
+    pub range_min: f32,
+    /// Maximum range (m).
+    pub range_max: f32,
+    /// Mounting pose of the sensor on the robot (m, m, rad).
+    pub offset: crate::Pose2,
+}
+
+/// All runtime parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params {
+    /// Reference sensor model.
+    pub sensor: SensorModel,
+    /// Resampling spacing along surfaces (m).
+    pub resample_spacing: f32,
+    /// Most resampled points per scan.
+    pub max_points: u32,
+    /// Depth-jump distance between neighbouring points (m).
+    pub jump_distance: f32,
+    /// Histogram rho bins.
+    pub hist_rho_bins: u32,
+    /// Histogram theta bins.
+    pub hist_theta_bins: u32,
+    /// Histogram rho upper bound (m).
+    pub hist_rho_max: f32,
+    /// Fewest candidates.
+    pub nc_min: u32,
+    /// Most candidates.
+    pub nc_max: u32,
+    /// Correlation margin below the best for candidates.
+    pub nc_margin: f32,
+    /// Descriptor radius (m).
+    pub desc_radius: f32,
+    /// Tentative correspondences per input point.
+    pub tentative_k: u32,
+    /// Largest rho deviation with non-zero affinity (m).
+    pub max_rho_dev: f32,
+    /// Logistic weights (bias, 1/m^2, 1/rad^2).
+    pub w: [f32; 3],
+    /// Power iterations.
+    pub power_iters: u32,
+    /// Binarization fraction.
+    pub binarize_frac: f32,
+    /// RANSAC iterations.
+    pub ransac_iters: u32,
+    /// RANSAC inlier distance (m).
+    pub ransac_threshold: f32,
+    /// RANSAC seed.
+    pub ransac_seed: u32,
+    /// Fewest inliers.
+    pub min_inliers: u32,
+    /// Refinement iterations (0: off).
+    pub refine_iters: u32,
+    /// Refinement cut-off distance (m).
+    pub refine_max_dist: f32,
+    /// Vicinity sigma_d (m).
+    pub sigma_d: f32,
+    /// Acceptance ratio (paper 0.5).
+    pub accept_ratio: f32,
+    /// Fewest valid points in an input scan.
+    pub min_valid_points: u32,
+    /// Site selection rule.
+    pub selection: Selection,
+}
+
+impl Params {
+    /// The defaults for a reference sensor of `beams` beams over 360 degrees
+    /// and `range_max` metres.
+    pub fn defaults(beams: u32, range_max: f32) -> Params {
+        let inc = 2.0 * core::f32::consts::PI / beams.max(1) as f32;
+        Params {
+            sensor: SensorModel {
+                beams,
+                angle_min: -core::f32::consts::PI,
+                angle_increment: inc,
+                range_min: 0.0,
+                range_max,
+                offset: crate::Pose2::default(),
+            },
+            resample_spacing: 0.10,
+            max_points: 160,
+            jump_distance: 0.30,
+            hist_rho_bins: 32,
+            hist_theta_bins: 18,
+            hist_rho_max: 16.0,
+            nc_min: 5,
+            nc_max: 30,
+            nc_margin: 0.25,
+            desc_radius: 2.0,
+            tentative_k: 4,
+            max_rho_dev: 0.3,
+            w: [4.0, -100.0, -20.0],
+            power_iters: 30,
+            binarize_frac: 0.05,
+            ransac_iters: 64,
+            ransac_threshold: 0.2,
+            ransac_seed: 0x5EED,
+            min_inliers: 6,
+            refine_iters: 10,
+            refine_max_dist: 0.3,
+            sigma_d: 0.05,
+            accept_ratio: 0.5,
+            min_valid_points: 20,
+            selection: Selection::Vicinity,
+        }
+    }
+
+    /// Number of cells of a PGR histogram.
+    pub fn hist_cells(&self) -> usize {
+        self.hist_rho_bins as usize * self.hist_theta_bins as usize
+    }
+
+    /// Checks ranges; returns the name of the first bad field.
+    pub fn validate(&self) -> Result<(), &'static str> {
+        let s = &self.sensor;
+        let pos = |v: f32| v.is_finite() && v > 0.0;
+        let fin = |v: f32| v.is_finite();
+        if s.beams < 3 || s.beams > MAX_REF_BEAMS {
+            return Err("beams");
+        }
+        if !fin(s.angle_min)
+            || !pos(s.angle_increment)
+            || s.angle_increment * s.beams as f32 > 6.2832 * 1.0001
+        {
+            return Err("angle_increment");
+        }
+        if !pos(s.range_max) || !(s.range_min >= 0.0 && s.range_min < s.range_max) {
+            return Err("range_max/range_min");
+        }
+        if !(fin(s.offset.x) && fin(s.offset.y) && fin(s.offset.theta)) {
+            return Err("sensor offset");
+        }
+        if !pos(self.resample_spacing) {
+            return Err("resample_spacing");
+        }
+        if self.max_points < 8 || self.max_points > MAX_POINTS {
+            return Err("max_points");
+        }
+        if !pos(self.jump_distance) {
+            return Err("jump_distance");
+        }
+        if self.hist_rho_bins == 0
+            || self.hist_theta_bins == 0
+            || self.hist_rho_bins * self.hist_theta_bins > MAX_HIST_CELLS
+        {
+            return Err("histogram bins");
+        }
+        if !pos(self.hist_rho_max) {
+            return Err("hist_rho_max");
+        }
+        if self.nc_min == 0 || self.nc_max < self.nc_min || self.nc_max > MAX_CANDIDATES {
+            return Err("nc_min/nc_max");
+        }
+        if !(fin(self.nc_margin) && self.nc_margin >= 0.0) {
+            return Err("nc_margin");
+        }
+        if !pos(self.desc_radius) {
+            return Err("desc_radius");
+        }
+        if self.tentative_k == 0 || self.tentative_k > MAX_TENTATIVE_K {
+            return Err("tentative_k");
+        }
+        if !pos(self.max_rho_dev) {
+            return Err("max_rho_dev");
+        }
+        if !self.w.iter().all(|v| v.is_finite()) {
+            return Err("w");
+        }
+        if self.power_iters == 0 || self.power_iters > 1000 {
+            return Err("power_iters");
+        }
+        if !(self.binarize_frac >= 0.0 && self.binarize_frac < 1.0) {
+            return Err("binarize_frac");
+        }
+        if self.ransac_iters == 0 || self.ransac_iters > 100_000 {
+            return Err("ransac_iters");
+        }
+        if !pos(self.ransac_threshold) {
+            return Err("ransac_threshold");
+        }
+        if self.min_inliers < 2 {
+            return Err("min_inliers");
+        }
+        if self.refine_iters > 1000 || !pos(self.refine_max_dist) {
+            return Err("refine");
+        }
+        if !pos(self.sigma_d) {
+            return Err("sigma_d");
+        }
+        if !(self.accept_ratio >= 0.0 && self.accept_ratio <= 1.0) {
+            return Err("accept_ratio");
+        }
+        if self.min_valid_points < 3 {
+            return Err("min_valid_points");
+        }
+        Ok(())
+    }
+
+    /// Reads a record (no validation; call [`Params::validate`]).
+    pub fn from_record(r: &ParamsRecord) -> Result<Params, &'static str> {
+        Ok(Params {
+            sensor: SensorModel {
+                beams: r.beams.get(),
+                angle_min: r.angle_min.get(),
+                angle_increment: r.angle_increment.get(),
+                range_min: r.range_min.get(),
+                range_max: r.range_max.get(),
+                offset: crate::Pose2 {
+                    x: r.sensor_x.get(),
+                    y: r.sensor_y.get(),
+                    theta: r.sensor_theta.get(),
+                },
+            },
+            resample_spacing: r.resample_spacing.get(),
+            max_points: r.max_points.get(),
+            jump_distance: r.jump_distance.get(),
+            hist_rho_bins: r.hist_rho_bins.get(),
+            hist_theta_bins: r.hist_theta_bins.get(),
+            hist_rho_max: r.hist_rho_max.get(),
+            nc_min: r.nc_min.get(),
+            nc_max: r.nc_max.get(),
+            nc_margin: r.nc_margin.get(),
+            desc_radius: r.desc_radius.get(),
+            tentative_k: r.tentative_k.get(),
+            max_rho_dev: r.max_rho_dev.get(),
+            w: [r.w[0].get(), r.w[1].get(), r.w[2].get()],
+            power_iters: r.power_iters.get(),
+            binarize_frac: r.binarize_frac.get(),
+            ransac_iters: r.ransac_iters.get(),
+            ransac_threshold: r.ransac_threshold.get(),
+            ransac_seed: r.ransac_seed.get(),
+            min_inliers: r.min_inliers.get(),
+            refine_iters: r.refine_iters.get(),
+            refine_max_dist: r.refine_max_dist.get(),
+            sigma_d: r.sigma_d.get(),
+            accept_ratio: r.accept_ratio.get(),
+            min_valid_points: r.min_valid_points.get(),
+            selection: match r.selection.get() {
+                0 => Selection::MatchScore,
+                1 => Selection::Vicinity,
+                _ => return Err("selection"),
+            },
+        })
+    }
+
+    /// The on-disk record.
+    pub fn to_record(&self) -> ParamsRecord {
+        let s = &self.sensor;
+        ParamsRecord {
+            beams: U32::new(s.beams),
+            angle_min: F32::new(s.angle_min),
+            angle_increment: F32::new(s.angle_increment),
+            range_max: F32::new(s.range_max),
+            range_min: F32::new(s.range_min),
+            sensor_x: F32::new(s.offset.x),
+            sensor_y: F32::new(s.offset.y),
+            sensor_theta: F32::new(s.offset.theta),
+            resample_spacing: F32::new(self.resample_spacing),
+            max_points: U32::new(self.max_points),
+            jump_distance: F32::new(self.jump_distance),
+            hist_rho_bins: U32::new(self.hist_rho_bins),
+            hist_theta_bins: U32::new(self.hist_theta_bins),
+            hist_rho_max: F32::new(self.hist_rho_max),
+            nc_min: U32::new(self.nc_min),
+            nc_max: U32::new(self.nc_max),
+            nc_margin: F32::new(self.nc_margin),
+            desc_radius: F32::new(self.desc_radius),
+            tentative_k: U32::new(self.tentative_k),
+            max_rho_dev: F32::new(self.max_rho_dev),
+            w: [
+                F32::new(self.w[0]),
+                F32::new(self.w[1]),
+                F32::new(self.w[2]),
+            ],
+            power_iters: U32::new(self.power_iters),
+            binarize_frac: F32::new(self.binarize_frac),
+            ransac_iters: U32::new(self.ransac_iters),
+            ransac_threshold: F32::new(self.ransac_threshold),
+            ransac_seed: U32::new(self.ransac_seed),
+            min_inliers: U32::new(self.min_inliers),
+            refine_iters: U32::new(self.refine_iters),
+            refine_max_dist: F32::new(self.refine_max_dist),
+            sigma_d: F32::new(self.sigma_d),
+            accept_ratio: F32::new(self.accept_ratio),
+            min_valid_points: U32::new(self.min_valid_points),
+            selection: U32::new(match self.selection {
+                Selection::MatchScore => 0,
+                Selection::Vicinity => 1,
+            }),
+            reserved: [U32::new(0); 14],
+        }
+    }
+}

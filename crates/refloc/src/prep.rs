@@ -1,0 +1,207 @@
+//! Scan preparation, the first step shared by the compiler and the runtime:
+//! beam-ordered points are split into surfaces at depth jumps, isolated points
+//! are dropped, points are resampled to a roughly uniform spacing along each
+//! surface (so a wall seen from near and from far gives the same density), and
+//! each kept point gets a unit tangent (paper eq. 1, taken over a short
+//! stretch of the surface rather than the two immediate neighbours).
+
+use crate::math::{dist2, norm};
+use crate::params::Params;
+
+/// How many dense points on either side are used to estimate a tangent, at most.
+const TANGENT_REACH: usize = 6;
+/// Tangent stretch half-length (m).
+const TANGENT_RADIUS: f32 = 0.25;
+
+/// True when consecutive beam points `a`, `b` lie on different surfaces.
+#[inline]
+pub fn is_jump(a: [f32; 2], b: [f32; 2], jump_distance: f32) -> bool {
+    if !(a[0].is_finite() && b[0].is_finite()) {
+        return true;
+    }
+    let d2 = dist2(a, b);
+    // The allowed gap grows with range: consecutive beams at range r on a wall
+    // seen obliquely are several r * dtheta apart.
+    let r = norm(a).min(norm(b));
+    let lim = jump_distance + 0.05 * r;
+    d2 > lim * lim
+}
+
+/// Prepares `dense` (beam-ordered sensor-frame points; a non-finite x marks a
+/// missing beam). `wrap` says the scan covers the full circle, so the last
+/// beam neighbours the first. Writes up to `out_pts.len()` points and their
+/// unit tangents; returns how many.
+pub fn prepare(
+    dense: &[[f32; 2]],
+    wrap: bool,
+    params: &Params,
+    out_pts: &mut [[f32; 2]],
+    out_tan: &mut [[f32; 2]],
+) -> usize {
+    let n = dense.len();
+    let cap = out_pts
+        .len()
+        .min(out_tan.len())
+        .min(params.max_points as usize);
+    if n < 3 || cap == 0 {
+        return 0;
+    }
+    let jd = params.jump_distance;
+    let next = |i: usize| -> Option<usize> {
+        if i + 1 < n {
+            Some(i + 1)
+        } else if wrap {
+            Some(0)
+        } else {
+            None
+        }
+    };
+    let prev = |i: usize| -> Option<usize> {
+        if i > 0 {
+            Some(i - 1)
+        } else if wrap {
+            Some(n - 1)
+        } else {
+            None
+        }
+    };
+    let linked = |i: usize, j: Option<usize>| match j {
+        Some(j) => !is_jump(dense[i], dense[j], jd),
+        None => false,
+    };
+    // A start index: in a wrapped scan, begin right after a jump so no surface
+    // is split in two; if there is none (a closed room), begin at 0.
+    let mut start = 0;
+    if wrap {
+        for i in 0..n {
+            if !linked(i, prev(i)) {
+                start = i;
+                break;
+            }
+        }
+    }
+    // Total surface length, to widen the spacing if it would give too many points.
+    let mut length = 0.0f32;
+    for i in 0..n {
+        if linked(i, next(i)) {
+            length += libm::sqrtf(dist2(dense[i], dense[next(i).unwrap_or(i)]));
+        }
+    }
+    let spacing = params.resample_spacing.max(length / cap as f32 * 1.02);
+    let sp2 = spacing * spacing;
+
+    let mut count = 0;
+    let mut last: Option<[f32; 2]> = None;
+    for s in 0..n {
+        let i = (start + s) % n;
+        let p = dense[i];
+        if !p[0].is_finite() {
+            last = None;
+            continue;
+        }
+        let has_prev = linked(i, prev(i));
+        let has_next = linked(i, next(i));
+        if !has_prev && !has_next {
+            // Isolated return: an outlier or a thin object; no tangent either.
+            last = None;
+            continue;
+        }
+        let keep = match last {
+            None => true,
+            Some(l) => !has_prev || dist2(l, p) >= sp2,
+        };
+        if !keep {
+            continue;
+        }
+        if let Some(t) = tangent(dense, i, wrap, jd) {
+            if count < cap {
+                out_pts[count] = p;
+                out_tan[count] = t;
+                count += 1;
+                last = Some(p);
+            }
+        }
+    }
+    count
+}
+
+/// Unit tangent at dense point `i`, from the farthest linked points within
+/// [`TANGENT_RADIUS`] on each side, oriented along increasing beam index.
+fn tangent(dense: &[[f32; 2]], i: usize, wrap: bool, jd: f32) -> Option<[f32; 2]> {
+    let n = dense.len();
+    let r2 = TANGENT_RADIUS * TANGENT_RADIUS;
+    let step = |k: usize, fwd: bool| -> Option<usize> {
+        if fwd {
+            if k + 1 < n {
+                Some(k + 1)
+            } else if wrap {
+                Some(0)
+            } else {
+                None
+            }
+        } else if k > 0 {
+            Some(k - 1)
+        } else if wrap {
+            Some(n - 1)
+        } else {
+            None
+        }
+    };
+    let mut ends = [i, i];
+    for (e, fwd) in ends.iter_mut().zip([false, true]) {
+        let mut k = i;
+        for _ in 0..TANGENT_REACH {
+            match step(k, fwd) {
+                Some(j)
+                    if j != i
+                        && !is_jump(dense[k], dense[j], jd)
+                        && dist2(dense[i], dense[j]) <= r2 =>
+                {
+                    k = j
+                }
+                _ => break,
+            }
+        }
+        // Always allow the immediate linked neighbour, however far.
+        if k == i {
+            if let Some(j) = step(i, fwd) {
+                if !is_jump(dense[i], dense[j], jd) {
+                    k = j;
+                }
+            }
+        }
+        *e = k;
+    }
+    let d = [
+        dense[ends[1]][0] - dense[ends[0]][0],
+        dense[ends[1]][1] - dense[ends[0]][1],
+    ];
+    let l = norm(d);
+    if ends[0] == ends[1] || !(l > 1e-6) {
+        return None;
+    }
+    Some([d[0] / l, d[1] / l])
+}
+
+/// Sensor-frame points of a range scan: `ranges[k]` at angle
+/// `angle_min + k * angle_increment`; out-of-limits or non-finite ranges give
+/// a NaN point (missing beam). Writes `min(ranges.len(), out.len())` points.
+pub fn ranges_to_points(
+    ranges: &[f32],
+    angle_min: f32,
+    angle_increment: f32,
+    range_min: f32,
+    range_max: f32,
+    out: &mut [[f32; 2]],
+) -> usize {
+    let n = ranges.len().min(out.len());
+    for (k, (o, &r)) in out.iter_mut().zip(ranges).enumerate().take(n) {
+        *o = if r.is_finite() && r >= range_min && r <= range_max && r > 0.0 {
+            let a = angle_min + k as f32 * angle_increment;
+            [r * libm::cosf(a), r * libm::sinf(a)]
+        } else {
+            [f32::NAN, f32::NAN]
+        };
+    }
+    n
+}
