@@ -5,11 +5,19 @@
 //! diagram and its graph), [`sites`] (reference site placement and coverage).
 #![deny(missing_docs)]
 
+pub mod compile;
 pub mod edt;
+pub mod eval;
+pub mod figures;
+pub mod fit;
 pub mod gvd;
 pub mod mapfile;
+pub mod pipeline;
 pub mod plot;
 pub mod render;
 pub mod rng;
+pub mod scanio;
+pub mod sim;
 pub mod sites;
 pub mod synth;
+pub mod writer;

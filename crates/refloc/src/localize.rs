@@ -543,19 +543,29 @@ fn load_scan(
                     "range_max must be finite and positive",
                 ));
             }
-            // Orientation: sum of wrapped angle steps between valid points.
+            // Orientation: majority vote of the turn direction between
+            // consecutive valid points (robust to outliers, which make large
+            // jumps of either sign); coverage: the sum of the small steps.
+            let (mut ccw, mut cw) = (0usize, 0usize);
             let mut turn = 0.0f32;
-            let mut last: Option<f32> = None;
+            let mut last: Option<[f32; 2]> = None;
             for p in points.iter() {
                 if p[0].is_finite() && p[1].is_finite() {
-                    let a = crate::math::atan2(p[1], p[0]);
                     if let Some(l) = last {
-                        turn += crate::wrap_angle(a - l);
+                        let step = crate::math::signed_angle(l, *p);
+                        if libm::fabsf(step) < core::f32::consts::FRAC_PI_4 {
+                            if step > 0.0 {
+                                ccw += 1;
+                            } else if step < 0.0 {
+                                cw += 1;
+                            }
+                            turn += libm::fabsf(step);
+                        }
                     }
-                    last = Some(a);
+                    last = Some(*p);
                 }
             }
-            let rev = turn < 0.0;
+            let rev = cw > ccw;
             for k in 0..n {
                 let p = points[if rev { n - 1 - k } else { k }];
                 let r = crate::math::norm(p);
@@ -570,7 +580,7 @@ fn load_scan(
                     rng[k] = f32::INFINITY;
                 }
             }
-            Ok((valid, libm::fabsf(turn) > 2.0 * PI * 0.97, *range_max))
+            Ok((valid, turn > 2.0 * PI * 0.9, *range_max))
         }
     }
 }

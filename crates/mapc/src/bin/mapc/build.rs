@@ -1,0 +1,148 @@
+//! `mapc build`.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use mapc::mapfile;
+use mapc::pipeline::{self, BuildConfig};
+
+use crate::util::{fail_err, input_err, parse_triple, CliResult, Ui};
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The map: a ROS map_server YAML, or its PGM/PNG image (then the YAML
+    /// beside it with the same stem is used, else --resolution is required).
+    pub map: PathBuf,
+    /// Output database [default: <map stem>.refdb in the current directory].
+    #[arg(short, long, value_name = "OUT.refdb")]
+    pub output: Option<PathBuf>,
+    /// Metres per cell, for an image without a YAML beside it.
+    #[arg(long, value_name = "M")]
+    pub resolution: Option<f64>,
+    /// Map-frame pose of the image's lower-left corner, for an image without
+    /// a YAML: "x,y,yaw" (m, m, rad).
+    #[arg(long, value_name = "X,Y,YAW", value_parser = parse_triple, allow_hyphen_values = true)]
+    pub origin: Option<[f64; 3]>,
+    #[command(flatten)]
+    pub opts: BuildOpts,
+}
+
+/// Compile options shared by `build`, `demo` and `eval`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct BuildOpts {
+    /// Beams per 360-degree reference scan.
+    #[arg(long, default_value_t = 362)]
+    pub beams: u32,
+    /// Maximum sensor range (m).
+    #[arg(long, default_value_t = 30.0, value_name = "M")]
+    pub range_max: f32,
+    /// Sensor mounting pose on the robot "x,y,yaw" (m, m, rad).
+    #[arg(long, value_name = "X,Y,YAW", value_parser = parse_triple, allow_hyphen_values = true)]
+    pub sensor_offset: Option<[f64; 3]>,
+    /// Treat unknown cells as free space (default: they stop beams and count as obstacles).
+    #[arg(long)]
+    pub unknown_free: bool,
+    /// Robot radius (m): reference sites keep at least this clearance.
+    #[arg(long, default_value_t = 0.2, value_name = "M")]
+    pub robot_radius: f64,
+    /// Largest spacing between reference sites along a GVD edge (m).
+    #[arg(long, value_name = "M")]
+    pub site_spacing: Option<f64>,
+    /// Simulated queries used to fit the logistic weights (0: built-in weights).
+    #[arg(long, default_value_t = 150)]
+    pub fit_queries: usize,
+    /// Seed of every random choice in the build.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Most candidate sites for the fine stage.
+    #[arg(long)]
+    pub nc_max: Option<u32>,
+    /// Vicinity acceptance ratio: accept when M > 4.5 * N_P * ratio (paper: 0.5).
+    #[arg(long, default_value_t = 0.5)]
+    pub accept_ratio: f32,
+    /// Site selection: "vicinity" (largest vicinity score) or "match-score" (paper: largest E).
+    #[arg(long, default_value = "vicinity")]
+    pub selection: String,
+    /// Gauss-Newton refinement iterations against the map (0: off, as in the paper).
+    #[arg(long)]
+    pub refine_iters: Option<u32>,
+}
+
+impl BuildOpts {
+    pub fn config(&self) -> BuildConfig {
+        let d = BuildConfig::default();
+        BuildConfig {
+            beams: self.beams,
+            range_max: self.range_max,
+            sensor_offset: self.sensor_offset.map(|o| [o[0] as f32, o[1] as f32, o[2] as f32]).unwrap_or([0.0; 3]),
+            unknown_blocks: !self.unknown_free,
+            robot_radius: self.robot_radius,
+            site_spacing: self.site_spacing.unwrap_or(d.site_spacing),
+            coverage_range: d.coverage_range,
+            fit_queries: self.fit_queries,
+            seed: self.seed,
+            nc_max: self.nc_max.unwrap_or(d.nc_max),
+            accept_ratio: self.accept_ratio,
+            selection: self.selection.clone(),
+            refine_iters: self.refine_iters.unwrap_or(d.refine_iters),
+        }
+    }
+}
+
+/// Loads a map given as YAML or image.
+pub fn load_map(map: &std::path::Path, resolution: Option<f64>, origin: Option<[f64; 3]>) -> Result<mapfile::MapSource, mapfile::MapError> {
+    let is_yaml = matches!(
+        map.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref(),
+        Some("yaml") | Some("yml")
+    );
+    if is_yaml {
+        mapfile::load_yaml(map)
+    } else {
+        mapfile::load_image(map, resolution, origin)
+    }
+}
+
+pub fn run(a: Args, ui: &Ui) -> CliResult {
+    let t0 = Instant::now();
+    let cfg = a.opts.config();
+    cfg.params().map_err(|e| input_err(anyhow::anyhow!(e)))?;
+    let out = a.output.clone().unwrap_or_else(|| {
+        let stem = a.map.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "map".into());
+        PathBuf::from(format!("{stem}.refdb"))
+    });
+    let sp = ui.stage("loading map");
+    let src = load_map(&a.map, a.resolution, a.origin).map_err(input_err)?;
+    sp.set_message("compiling");
+    let built = pipeline::build(&src, &cfg).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.map.display())))?;
+    sp.set_message("writing");
+    let secs: Vec<_> = built.sections.iter().map(|(k, b)| (*k, b.as_slice())).collect();
+    let size = mapc::writer::write_refdb(&out, &secs).map_err(|e| fail_err(anyhow::anyhow!("{}: cannot write: {e}", out.display())))?;
+    // Round-trip: the file we wrote must read back and verify.
+    let db = crate::util::open_db(&out)?;
+    db.verify().map_err(|e| fail_err(anyhow::anyhow!("{}: written file does not verify: {e}", out.display())))?;
+    sp.finish_and_clear();
+    if !ui.quiet {
+        let g = &src.grid;
+        let res = g.resolution;
+        let free = g.free_count();
+        let gvd_len: f64 = built.gvd.edges.iter().map(|e| e.length_m).sum();
+        eprintln!("mapc build {} -> {}", a.map.display(), out.display());
+        eprintln!("  grid           {} x {} cells at {:.3} m ({:.1} m x {:.1} m)", g.width, g.height, res, g.width as f64 * res, g.height as f64 * res);
+        eprintln!("  free area      {:.1} m^2 ({} cells)", free as f64 * res * res, free);
+        eprintln!("  GVD            {:.1} m, {} nodes, {} edges", gvd_len, built.gvd.nodes.len(), built.gvd.edges.len());
+        eprintln!("  sites          {}", built.sites.len());
+        eprintln!(
+            "  coverage       {:.2}% of {} free cells (clearance >= 0.25 m) see a site within {:.0} m",
+            100.0 * built.coverage.fraction,
+            built.coverage.considered,
+            cfg.coverage_range
+        );
+        eprintln!("  logistic w     [{:.3}, {:.3}, {:.3}] from {} pairs of {} simulated scans", built.fit.w[0], built.fit.w[1], built.fit.w[2], built.fit.samples, built.fit.queries);
+        let t = &built.times;
+        eprintln!("  stages         edt {:.3} s, gvd {:.3} s, sites {:.3} s, compile {:.3} s", t.edt, t.gvd, t.sites, t.compile);
+        eprintln!("  build time     {:.2} s", t0.elapsed().as_secs_f64());
+        eprintln!("  file size      {} bytes ({:.2} MiB)", size, size as f64 / 1048576.0);
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,300 @@
+//! `mapc eval`: the paper's experiments on simulated scans, a JSON report,
+//! PNG figures, and the CI regression check.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use mapc::eval::{self, ScanSpec, Summary, Tolerance, Trial};
+use mapc::figures;
+use mapc::rng::Rng;
+use serde_json::{json, Value};
+
+use crate::util::{fail_err, input_err, open_db, CliResult, Ui};
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct Args {
+    /// The database.
+    pub db: PathBuf,
+    /// Random poses for E4 (and E5).
+    #[arg(long, default_value_t = 1000)]
+    pub poses: usize,
+    /// Seed of every random choice.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Poses keep at least this distance from obstacles (m).
+    #[arg(long, default_value_t = 0.3, value_name = "M")]
+    pub clearance: f32,
+    /// Beams of the simulated scans.
+    #[arg(long, default_value_t = 362)]
+    pub beams: usize,
+    /// Field of view of the simulated scans (degrees).
+    #[arg(long, default_value_t = 360.0, value_name = "DEG")]
+    pub fov: f32,
+    /// Maximum range of the simulated scans (m).
+    #[arg(long, default_value_t = 30.0, value_name = "M")]
+    pub range_max: f32,
+    /// Range noise sigma of the dynamic runs (m).
+    #[arg(long, default_value_t = 0.005, value_name = "M")]
+    pub noise: f32,
+    /// Outliers per scan in the dynamic runs (random short returns; and x-y swaps in dynamic-swap).
+    #[arg(long, default_value_t = 60)]
+    pub outliers: usize,
+    /// Experiments to run, comma separated: static, dynamic, dynamic-swap, e1, e2, wrong-map.
+    #[arg(long, default_value = "static,dynamic,dynamic-swap,e1", value_delimiter = ',')]
+    pub experiments: Vec<String>,
+    /// E1 trials (paper: 500).
+    #[arg(long, default_value_t = 500)]
+    pub e1_trials: usize,
+    /// E2 trials per point (paper: 30).
+    #[arg(long, default_value_t = 30)]
+    pub e2_trials: usize,
+    /// For wrong-map: the other map (YAML) whose scans are localized against this database.
+    #[arg(long, value_name = "MAP.yaml")]
+    pub foreign: Option<PathBuf>,
+    /// Directory for report.json and figures.
+    #[arg(long, default_value = "build-artifacts/eval", value_name = "DIR")]
+    pub out: PathBuf,
+    /// Skip the PNG figures.
+    #[arg(long)]
+    pub no_figures: bool,
+    /// Baseline report: exit 1 when this run is worse by more than the tolerances.
+    #[arg(long, value_name = "BASELINE.json")]
+    pub check: Option<PathBuf>,
+    /// Allowed drop of a success rate (absolute fraction).
+    #[arg(long, default_value_t = 0.02)]
+    pub tol_rate: f64,
+    /// Allowed rise of a false-accept rate (absolute fraction).
+    #[arg(long, default_value_t = 0.01)]
+    pub tol_false_accept: f64,
+    /// Allowed growth factor of mean errors.
+    #[arg(long, default_value_t = 1.5)]
+    pub tol_error_factor: f64,
+}
+
+fn fmt_summary(name: &str, s: &Summary) -> String {
+    format!(
+        "{name:<14} n {:>5}  ok {:>6.2}%  false-acc {:>5.2}%  mean |x| {:>6.1} mm |y| {:>6.1} mm |th| {:>5.2} deg  max {:>6.1}/{:>6.1} mm {:>5.2} deg  med {:>5.1} mm  recall {:>6.2}%  {:>7.2} ms/query",
+        s.n,
+        100.0 * s.success_rate,
+        100.0 * s.false_accept_rate,
+        1000.0 * s.mean_abs_x,
+        1000.0 * s.mean_abs_y,
+        s.mean_abs_theta.to_degrees(),
+        1000.0 * s.max_abs[0],
+        1000.0 * s.max_abs[1],
+        s.max_abs[2].to_degrees(),
+        1000.0 * s.median_pos,
+        100.0 * s.correct_site_recall,
+        s.median_time_us / 1000.0
+    )
+}
+
+pub fn run(a: Args, ui: &Ui) -> CliResult {
+    let report = evaluate(&a, ui)?;
+    std::fs::create_dir_all(&a.out).map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.out.display())))?;
+    let path = a.out.join("report.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&report).unwrap_or_default())
+        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", path.display())))?;
+    ui.note(&format!("report: {}", path.display()));
+    if let Some(base) = &a.check {
+        let text = std::fs::read_to_string(base).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", base.display())))?;
+        let b: Value = serde_json::from_str(&text).map_err(|e| input_err(anyhow::anyhow!("{}: not a report: {e}", base.display())))?;
+        let parse = |v: &Value| -> Vec<(String, Summary)> {
+            v["summaries"]
+                .as_object()
+                .map(|m| m.iter().filter_map(|(k, s)| Some((k.clone(), serde_json::from_value(s.clone()).ok()?))).collect())
+                .unwrap_or_default()
+        };
+        let tol = Tolerance {
+            rate: a.tol_rate,
+            false_accept: a.tol_false_accept,
+            error_factor: a.tol_error_factor,
+            ..Tolerance::default()
+        };
+        let base_s = parse(&b);
+        if base_s.is_empty() {
+            return Err(input_err(anyhow::anyhow!("{}: baseline has no summaries", base.display())));
+        }
+        let regs = eval::check(&parse(&report), &base_s, &tol);
+        if regs.is_empty() {
+            println!("check: no regression against {} (tolerances: rate {:.3}, false-accept {:.3}, error x{:.2})", base.display(), tol.rate, tol.false_accept, tol.error_factor);
+        } else {
+            for r in &regs {
+                println!("REGRESSION {}: baseline {:.6}, now {:.6}, limit {:.6}", r.metric, r.baseline, r.current, r.limit);
+            }
+            return Ok(ExitCode::from(1));
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Runs the requested experiments and returns the report.
+pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
+    let db = open_db(&a.db)?;
+    let fov = a.fov.to_radians();
+    if !(fov > 0.0 && fov <= 2.0 * std::f32::consts::PI + 1e-3) || a.beams < 3 {
+        return Err(input_err(anyhow::anyhow!("--fov must be in (0, 360] degrees and --beams at least 3")));
+    }
+    let want = |e: &str| a.experiments.iter().any(|x| x == e);
+    for e in &a.experiments {
+        if !["static", "dynamic", "dynamic-swap", "e1", "e2", "wrong-map"].contains(&e.as_str()) {
+            return Err(input_err(anyhow::anyhow!("unknown experiment '{e}'")));
+        }
+    }
+    let spec = |noise: f32, short: usize, swap: usize| ScanSpec {
+        beams: a.beams,
+        fov,
+        range_max: a.range_max,
+        noise,
+        short_outliers: short,
+        swap_outliers: swap,
+    };
+    let poses = eval::sample_poses(&db, a.poses, a.clearance, a.seed);
+    if poses.is_empty() {
+        return Err(input_err(anyhow::anyhow!("no free cell with clearance {} m to sample poses from", a.clearance)));
+    }
+    let mut summaries: BTreeMap<String, Value> = BTreeMap::new();
+    let mut report = json!({
+        "db": a.db.display().to_string(),
+        "config": {"poses": a.poses, "seed": a.seed, "clearance_m": a.clearance, "beams": a.beams, "fov_deg": a.fov,
+                   "range_max_m": a.range_max, "noise_m": a.noise, "outliers": a.outliers},
+        "sites": db.site_count(),
+    });
+    let runs: Vec<(&str, ScanSpec)> = [
+        ("static", spec(0.0, 0, 0)),
+        ("dynamic", spec(a.noise, a.outliers, 0)),
+        ("dynamic-swap", spec(a.noise, 0, a.outliers)),
+    ]
+    .into_iter()
+    .filter(|(n, _)| want(n))
+    .collect();
+    let mut static_trials: Option<Vec<Trial>> = None;
+    for (name, sp) in runs {
+        let pb = ui.progress(poses.len() as u64, name);
+        let tick = || pb.inc(1);
+        let trials = eval::run_e4(&db, &poses, &sp, a.seed, None, &tick);
+        pb.finish_and_clear();
+        let s = eval::summarize(&trials);
+        ui.note(&fmt_summary(name, &s));
+        if !a.no_figures {
+            let _ = std::fs::create_dir_all(&a.out);
+            let f = |n: &str| a.out.join(format!("{name}-{n}.png"));
+            let r = figures::poses_figure(&db, &trials, &format!("E4 {name}: true vs estimated poses"), 300, &f("poses"))
+                .and_then(|_| figures::error_figure(&trials, &format!("E4 {name}: pose errors (Fig. 12)"), &f("errors")))
+                .and_then(|_| figures::rank_figure(&trials, &format!("E5 {name}: coarse rank of the correct site (Fig. 16)"), &f("ranks")));
+            if let Err(e) = r {
+                ui.note(&format!("warning: figures not written: {e}"));
+            }
+        }
+        let ranks: Vec<usize> = trials.iter().filter_map(|t| t.correct_rank).collect();
+        let within = |k: usize| ranks.iter().filter(|&&r| r < k).count() as f64 / ranks.len().max(1) as f64;
+        report[format!("e5_{name}")] = json!({
+            "with_site_in_sight": ranks.len(),
+            "rank_within": {"1": within(1), "5": within(5), "10": within(10), "20": within(20), "30": within(30)},
+            "rank_histogram": (0..30).map(|k| ranks.iter().filter(|&&r| r == k).count()).collect::<Vec<_>>(),
+        });
+        let failures: Vec<&Trial> = trials.iter().filter(|t| !t.correct()).take(50).collect();
+        report[format!("failures_{name}")] = serde_json::to_value(&failures).unwrap_or(Value::Null);
+        summaries.insert(name.to_string(), serde_json::to_value(&s).unwrap_or(Value::Null));
+        if name == "static" {
+            static_trials = Some(trials);
+        }
+    }
+    let _ = static_trials;
+    if want("wrong-map") {
+        let Some(fp) = &a.foreign else {
+            return Err(input_err(anyhow::anyhow!("wrong-map needs --foreign MAP.yaml")));
+        };
+        let src = crate::build::load_map(fp, None, None).map_err(input_err)?;
+        let g = &src.grid;
+        let bits = g.blocked_bits(true);
+        let bg = refloc::raycast::BitGrid::new(g.width, g.height, &bits).ok_or_else(|| input_err(anyhow::anyhow!("grid")))?;
+        let frame = g.frame();
+        let df = mapc::edt::DistanceField::from_grid(g, true);
+        let fposes = eval::sample_poses_where(g.width, g.height, &frame, |i| df.clearance_m(i) >= a.clearance as f64, a.poses, a.seed ^ 0xF0);
+        let pb = ui.progress(fposes.len() as u64, "wrong-map");
+        let tick = || pb.inc(1);
+        let trials = eval::run_e4(&db, &fposes, &spec(0.0, 0, 0), a.seed, Some((&bg, &frame)), &tick);
+        pb.finish_and_clear();
+        let accepted = trials.iter().filter(|t| t.accepted).count();
+        ui.note(&format!("wrong-map      n {:>5}  accepted {} ({:.2}%)", trials.len(), accepted, 100.0 * accepted as f64 / trials.len().max(1) as f64));
+        // A wrong-map run has no correct answer: every acceptance is false.
+        let s = Summary {
+            n: trials.len(),
+            accepted,
+            false_accepts: accepted,
+            false_accept_rate: accepted as f64 / trials.len().max(1) as f64,
+            ..Summary::default()
+        };
+        summaries.insert("wrong-map".into(), serde_json::to_value(&s).unwrap_or(Value::Null));
+    }
+    if want("e1") {
+        let done = AtomicU64::new(0);
+        let pb = ui.progress(a.e1_trials as u64, "e1");
+        let e1poses = eval::sample_poses(&db, a.e1_trials, a.clearance, a.seed ^ 0xE1);
+        use rayon::prelude::*;
+        let trials: Vec<eval::E1Trial> = e1poses
+            .par_iter()
+            .enumerate()
+            .map(|(k, p)| {
+                let mut r = Rng::stream(a.seed ^ 0xE1E1, k as u64);
+                let t = eval::ssm_trial(&db, p, 0.010, 60, 0.4, 30f32.to_radians(), &mut r);
+                done.fetch_add(1, Ordering::Relaxed);
+                pb.inc(1);
+                t
+            })
+            .collect();
+        pb.finish_and_clear();
+        let errs: Vec<[f64; 3]> = trials.iter().filter_map(|t| t.err).collect();
+        let good: Vec<[f64; 3]> = errs.iter().copied().filter(|e| (e[0].powi(2) + e[1].powi(2)).sqrt() < 0.3 && e[2].abs() < 5f64.to_radians()).collect();
+        let (m, sd) = eval::mean_sd(&good);
+        ui.note(&format!(
+            "e1             n {:>5}  matched {} ({} within 0.3 m / 5 deg)  x {:.2} ({:.2}) mm  y {:.2} ({:.2}) mm  th {:.3} ({:.3}) deg   [paper: 0.27 (10.51), -0.42 (7.99), 0.01 (0.09)]",
+            trials.len(),
+            errs.len(),
+            good.len(),
+            m[0] * 1000.0,
+            sd[0] * 1000.0,
+            m[1] * 1000.0,
+            sd[1] * 1000.0,
+            m[2].to_degrees(),
+            sd[2].to_degrees()
+        ));
+        report["e1"] = json!({"trials": trials.len(), "matched": errs.len(), "correct": good.len(),
+            "mean_mm_mm_deg": [m[0]*1000.0, m[1]*1000.0, m[2].to_degrees()],
+            "sd_mm_mm_deg": [sd[0]*1000.0, sd[1]*1000.0, sd[2].to_degrees()],
+            "paper_mean": [0.27, -0.42, 0.01], "paper_sd": [10.51, 7.99, 0.09]});
+    }
+    if want("e2") {
+        use rayon::prelude::*;
+        let base = eval::sample_poses(&db, a.e2_trials, a.clearance, a.seed ^ 0xE2);
+        let curve = |noise: f32, outliers: usize, tag: u64| -> f64 {
+            let rates: Vec<f64> = base
+                .par_iter()
+                .enumerate()
+                .map(|(k, p)| {
+                    let mut r = Rng::stream(a.seed ^ tag, k as u64);
+                    eval::ssm_trial(&db, p, noise, outliers, 0.4, 30f32.to_radians(), &mut r).matching_rate
+                })
+                .collect();
+            rates.iter().sum::<f64>() / rates.len().max(1) as f64
+        };
+        let noises: Vec<f64> = (0..=10).map(|k| k as f64 * 5.0).collect();
+        let ra: Vec<f64> = noises.iter().enumerate().map(|(k, &n)| curve(n as f32 / 1000.0, 72, 0x2A00 + k as u64)).collect();
+        let ratios: Vec<f64> = (0..=10).map(|k| k as f64 * 0.1).collect();
+        let n_in = db.params().sensor.beams as f64;
+        let rb: Vec<f64> = ratios.iter().enumerate().map(|(k, &r)| curve(0.005, (r * n_in) as usize, 0x2B00 + k as u64)).collect();
+        ui.note(&format!("e2 (a) noise mm {:?} -> rate {:?}", noises, ra.iter().map(|v| (v * 100.0).round() / 100.0).collect::<Vec<_>>()));
+        ui.note(&format!("e2 (b) outlier ratio {:?} -> rate {:?}", ratios, rb.iter().map(|v| (v * 100.0).round() / 100.0).collect::<Vec<_>>()));
+        if !a.no_figures {
+            let _ = std::fs::create_dir_all(&a.out);
+            let _ = figures::curve_figure(&noises, &ra, "E2 (a): 72 outliers, rising noise (Fig. 6a)", "noise sigma (mm)", &a.out.join("e2-noise.png"));
+            let _ = figures::curve_figure(&ratios, &rb, "E2 (b): noise 5 mm, rising outliers (Fig. 6b)", "outlier / inlier ratio", &a.out.join("e2-outliers.png"));
+        }
+        report["e2"] = json!({"noise_mm": noises, "rate_vs_noise": ra, "outlier_ratio": ratios, "rate_vs_outliers": rb, "trials_per_point": a.e2_trials});
+    }
+    report["summaries"] = serde_json::to_value(&summaries).unwrap_or(Value::Null);
+    Ok(report)
+}

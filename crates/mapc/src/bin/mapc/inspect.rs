@@ -1,0 +1,197 @@
+//! `mapc info`, `mapc verify`, `mapc diff`.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use refloc::format::SectionKind;
+use refloc::RefDb;
+use serde_json::{json, Value};
+
+use crate::util::{fail_err, open_db, CliResult};
+
+#[derive(clap::Args, Debug)]
+pub struct InfoArgs {
+    /// The database.
+    pub db: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct VerifyArgs {
+    /// The database.
+    pub db: PathBuf,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct DiffArgs {
+    /// The old database.
+    pub a: PathBuf,
+    /// The new database.
+    pub b: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Sites closer than this are the same site (m).
+    #[arg(long, default_value_t = 0.01, value_name = "M")]
+    pub same: f32,
+    /// Sites within this of an old site count as moved rather than added/removed (m).
+    #[arg(long, default_value_t = 1.0, value_name = "M")]
+    pub moved: f32,
+}
+
+/// All parameters as a JSON object (units in the names).
+pub fn params_json(p: &refloc::Params) -> Value {
+    let s = &p.sensor;
+    json!({
+        "beams": s.beams, "angle_min_rad": s.angle_min, "angle_increment_rad": s.angle_increment,
+        "range_min_m": s.range_min, "range_max_m": s.range_max,
+        "sensor_offset": [s.offset.x, s.offset.y, s.offset.theta],
+        "resample_spacing_m": p.resample_spacing, "max_points": p.max_points, "jump_distance_m": p.jump_distance,
+        "hist_rho_bins": p.hist_rho_bins, "hist_theta_bins": p.hist_theta_bins, "hist_rho_max_m": p.hist_rho_max,
+        "nc_min": p.nc_min, "nc_max": p.nc_max, "nc_margin": p.nc_margin,
+        "desc_radius_m": p.desc_radius, "tentative_k": p.tentative_k, "max_rho_dev_m": p.max_rho_dev,
+        "logistic_w": p.w, "power_iters": p.power_iters, "binarize_frac": p.binarize_frac,
+        "ransac_iters": p.ransac_iters, "ransac_threshold_m": p.ransac_threshold, "ransac_seed": p.ransac_seed,
+        "min_inliers": p.min_inliers, "refine_iters": p.refine_iters, "refine_max_dist_m": p.refine_max_dist,
+        "sigma_d_m": p.sigma_d, "accept_ratio": p.accept_ratio, "min_valid_points": p.min_valid_points,
+        "selection": format!("{:?}", p.selection),
+        "scratch_bytes_362": refloc::scratch_size(p, 362), "scratch_bytes_1081": refloc::scratch_size(p, 1081),
+    })
+}
+
+fn info_json<D: AsRef<[u8]>>(db: &RefDb<D>) -> Value {
+    let m = db.meta();
+    let sections: Vec<Value> = SectionKind::ALL
+        .iter()
+        .map(|&k| json!({"kind": k.name(), "bytes": db.section(k).len(), "crc32c": format!("{:08x}", db.section_crc(k))}))
+        .collect();
+    let manifest: Value = serde_json::from_str(db.manifest()).unwrap_or(Value::Null);
+    json!({
+        "format_version": refloc::format::FORMAT_VERSION,
+        "file_bytes": db.bytes().len(),
+        "grid": {"width": m.width.get(), "height": m.height.get(), "resolution_m": m.resolution.get(),
+                 "origin": [m.origin_x.get(), m.origin_y.get(), m.origin_yaw.get()],
+                 "unknown_blocks": m.unknown_blocks.get() != 0, "free_cells": m.free_cells.get()},
+        "sites": db.site_count(),
+        "sections": sections,
+        "params": params_json(db.params()),
+        "manifest": manifest,
+    })
+}
+
+pub fn info(a: InfoArgs) -> CliResult {
+    let db = open_db(&a.db)?;
+    let j = info_json(&db);
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&j).unwrap_or_default());
+        return Ok(ExitCode::SUCCESS);
+    }
+    let m = db.meta();
+    println!("{}: refdb format v{}, {} bytes", a.db.display(), refloc::format::FORMAT_VERSION, db.bytes().len());
+    println!(
+        "grid      {} x {} cells, {:.3} m/cell, origin ({:.3}, {:.3}, {:.4} rad)",
+        m.width.get(),
+        m.height.get(),
+        m.resolution.get(),
+        m.origin_x.get(),
+        m.origin_y.get(),
+        m.origin_yaw.get()
+    );
+    println!("sites     {}", db.site_count());
+    println!("sections");
+    for k in SectionKind::ALL {
+        println!("  {:<10} {:>10} bytes  crc32c {:08x}", k.name(), db.section(k).len(), db.section_crc(k));
+    }
+    println!("params");
+    if let Value::Object(p) = &j["params"] {
+        for (k, v) in p {
+            println!("  {k:<22} {v}");
+        }
+    }
+    if let Some(inp) = j["manifest"].get("input") {
+        println!("input     {}", inp);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn verify(a: VerifyArgs) -> CliResult {
+    let db = open_db(&a.db)?;
+    db.verify().map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.db.display())))?;
+    println!("{}: ok ({} sites, {} bytes, all checksums match)", a.db.display(), db.site_count(), db.bytes().len());
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn diff(a: DiffArgs) -> CliResult {
+    let da = open_db(&a.a)?;
+    let db = open_db(&a.b)?;
+    let (ja, jb) = (info_json(&da), info_json(&db));
+    let mut changes: Vec<Value> = Vec::new();
+    // Parameters and grid.
+    for group in ["grid", "params"] {
+        if let (Value::Object(pa), Value::Object(pb)) = (&ja[group], &jb[group]) {
+            for (k, va) in pa {
+                let vb = pb.get(k).cloned().unwrap_or(Value::Null);
+                if *va != vb {
+                    changes.push(json!({"what": format!("{group}.{k}"), "old": va, "new": vb}));
+                }
+            }
+        }
+    }
+    // Inputs.
+    for k in ["yaml_sha256", "image_sha256", "yaml", "image"] {
+        let (va, vb) = (&ja["manifest"]["input"][k], &jb["manifest"]["input"][k]);
+        if va != vb {
+            changes.push(json!({"what": format!("input.{k}"), "old": va, "new": vb}));
+        }
+    }
+    // Sites: match each new site to the nearest old one.
+    let sa: Vec<[f32; 2]> = (0..da.site_count()).map(|i| da.site_xy(i)).collect();
+    let sb: Vec<[f32; 2]> = (0..db.site_count()).map(|i| db.site_xy(i)).collect();
+    let nearest = |p: [f32; 2], set: &[[f32; 2]]| {
+        set.iter()
+            .enumerate()
+            .map(|(i, q)| (i, ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()))
+            .min_by(|x, y| x.1.total_cmp(&y.1))
+    };
+    let (mut added, mut moved, mut removed) = (Vec::new(), Vec::new(), Vec::new());
+    for (i, &p) in sb.iter().enumerate() {
+        match nearest(p, &sa) {
+            Some((_, d)) if d <= a.same => {}
+            Some((j, d)) if d <= a.moved => moved.push(json!({"old": j, "new": i, "from": sa[j], "to": p, "distance_m": d})),
+            _ => added.push(json!({"site": i, "at": p})),
+        }
+    }
+    for (j, &p) in sa.iter().enumerate() {
+        if !matches!(nearest(p, &sb), Some((_, d)) if d <= a.moved) {
+            removed.push(json!({"site": j, "at": p}));
+        }
+    }
+    let same = changes.is_empty() && added.is_empty() && moved.is_empty() && removed.is_empty() && sa.len() == sb.len();
+    let report = json!({"identical_bytes": da.bytes() == db.bytes(), "same": same, "changes": changes,
+        "sites": {"old": sa.len(), "new": sb.len(), "added": added, "removed": removed, "moved": moved}});
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report).unwrap_or_default());
+    } else {
+        println!("{} -> {}", a.a.display(), a.b.display());
+        if da.bytes() == db.bytes() {
+            println!("identical files");
+        }
+        for c in &changes {
+            println!("  changed {}: {} -> {}", c["what"].as_str().unwrap_or(""), c["old"], c["new"]);
+        }
+        println!(
+            "  sites: {} -> {} ({} added, {} removed, {} moved)",
+            sa.len(),
+            sb.len(),
+            added.len(),
+            removed.len(),
+            moved.len()
+        );
+        for m in &moved {
+            println!("    moved site {} -> {}: {:.3} m", m["old"], m["new"], m["distance_m"].as_f64().unwrap_or(0.0));
+        }
+    }
+    Ok(if same { ExitCode::SUCCESS } else { ExitCode::from(1) })
+}

@@ -1,0 +1,57 @@
+//! `mapc synth`: synthetic maps the project owns.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use mapc::synth::{self, SynthKind, SynthOptions};
+
+use crate::util::{fail_err, input_err, parse_triple, CliResult, Ui};
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Kind of map: office, warehouse or cave.
+    #[arg(long, default_value = "office")]
+    pub kind: String,
+    /// Width (cells).
+    #[arg(long, default_value_t = 1000)]
+    pub width: u32,
+    /// Height (cells).
+    #[arg(long, default_value_t = 1000)]
+    pub height: u32,
+    /// Metres per cell.
+    #[arg(long, default_value_t = 0.05, value_name = "M")]
+    pub resolution: f64,
+    /// Seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Map origin "x,y,yaw" (m, m, rad) written to the YAML.
+    #[arg(long, value_name = "X,Y,YAW", value_parser = parse_triple, allow_hyphen_values = true)]
+    pub origin: Option<[f64; 3]>,
+    /// Output directory.
+    #[arg(short, long, default_value = "build-artifacts/synth", value_name = "DIR")]
+    pub out: PathBuf,
+    /// Map name (file stem) [default: <kind>-<width>x<height>-s<seed>].
+    #[arg(long)]
+    pub name: Option<String>,
+}
+
+pub fn run(a: Args, ui: &Ui) -> CliResult {
+    let kind: SynthKind = a.kind.parse().map_err(|e| input_err(anyhow::anyhow!("--kind: {e}")))?;
+    if !(a.resolution.is_finite() && a.resolution > 0.0) {
+        return Err(input_err(anyhow::anyhow!("--resolution must be a positive number of metres per cell")));
+    }
+    if a.width as u64 * a.height as u64 > (1u64 << 31) {
+        return Err(input_err(anyhow::anyhow!("{} x {} cells is more than 2^31 cells", a.width, a.height)));
+    }
+    let mut opts = SynthOptions::new(kind, a.width, a.height);
+    opts.resolution = a.resolution;
+    opts.seed = a.seed;
+    let t = std::time::Instant::now();
+    let map = synth::generate(&opts);
+    let name = a.name.clone().unwrap_or_else(|| format!("{}-{}x{}-s{}", kind.as_str(), a.width, a.height, a.seed));
+    let (yaml, _) = synth::write_ros_map(&a.out, &name, &map, a.origin.unwrap_or([0.0; 3]))
+        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.out.display())))?;
+    ui.note(&format!("{} ({} x {} cells, {:.2} s)", yaml.display(), map.width, map.height, t.elapsed().as_secs_f64()));
+    println!("{}", yaml.display());
+    Ok(ExitCode::SUCCESS)
+}

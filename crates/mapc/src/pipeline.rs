@@ -1,0 +1,220 @@
+//! `mapc build` as a library call: map source → distance field → GVD →
+//! sites → compiled sections → manifest. The binary adds progress, the
+//! summary and the atomic write.
+
+use std::time::Instant;
+
+use refloc::format::SectionKind;
+use refloc::params::{Params, Selection};
+use refloc::Pose2;
+use serde::Serialize;
+use sha2::Digest;
+
+use crate::compile::{self, CompileInput, Compiled, SiteIn};
+use crate::edt::DistanceField;
+use crate::fit::FitReport;
+use crate::gvd::{self, GvdGraph, GvdOptions};
+use crate::mapfile::MapSource;
+use crate::sites::{self, SiteOptions, SitePlacement};
+
+/// Every option of a build, validated (see `mapc build --help` for the
+/// command-line form and defaults).
+#[derive(Clone, Debug, Serialize)]
+pub struct BuildConfig {
+    /// Beams per reference scan (over 360 degrees).
+    pub beams: u32,
+    /// Reference sensor maximum range (m).
+    pub range_max: f32,
+    /// Sensor mounting pose on the robot (m, m, rad).
+    pub sensor_offset: [f32; 3],
+    /// Unknown cells stop beams and count as obstacles for the distance map.
+    pub unknown_blocks: bool,
+    /// Robot radius (m): sites keep at least this clearance.
+    pub robot_radius: f64,
+    /// Largest spacing between sites along a GVD edge (m).
+    pub site_spacing: f64,
+    /// Line-of-sight range of the coverage check (m).
+    pub coverage_range: f64,
+    /// Simulated queries for the logistic weight fit (0 keeps defaults).
+    pub fit_queries: usize,
+    /// Seed of every random choice in the build.
+    pub seed: u64,
+    /// Most coarse candidates.
+    pub nc_max: u32,
+    /// Vicinity acceptance ratio (paper 0.5).
+    pub accept_ratio: f32,
+    /// Site selection rule: "vicinity" or "match-score" (paper).
+    pub selection: String,
+    /// Pose refinement iterations against the map (0: off, as the paper).
+    pub refine_iters: u32,
+}
+
+impl Default for BuildConfig {
+    fn default() -> Self {
+        BuildConfig {
+            beams: 362,
+            range_max: 30.0,
+            sensor_offset: [0.0; 3],
+            unknown_blocks: true,
+            robot_radius: 0.2,
+            site_spacing: SiteOptions::default().edge_spacing_m,
+            coverage_range: 8.0,
+            fit_queries: 150,
+            seed: 1,
+            nc_max: Params::defaults(362, 30.0).nc_max,
+            accept_ratio: 0.5,
+            selection: "vicinity".into(),
+            refine_iters: Params::defaults(362, 30.0).refine_iters,
+        }
+    }
+}
+
+impl BuildConfig {
+    /// Runtime parameters for this configuration (before the fit).
+    pub fn params(&self) -> Result<Params, String> {
+        let mut p = Params::defaults(self.beams, self.range_max);
+        p.sensor.offset = Pose2::new(self.sensor_offset[0], self.sensor_offset[1], self.sensor_offset[2]);
+        p.nc_max = self.nc_max;
+        p.nc_min = p.nc_min.min(self.nc_max);
+        p.accept_ratio = self.accept_ratio;
+        p.refine_iters = self.refine_iters;
+        p.selection = match self.selection.as_str() {
+            "vicinity" => Selection::Vicinity,
+            "match-score" => Selection::MatchScore,
+            other => return Err(format!("unknown selection rule '{other}' (expected vicinity or match-score)")),
+        };
+        p.validate().map_err(|f| format!("invalid option: {f}"))?;
+        Ok(p)
+    }
+}
+
+/// Wall-clock time of each stage (s).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct StageTimes {
+    /// Distance transform.
+    pub edt: f64,
+    /// GVD and graph.
+    pub gvd: f64,
+    /// Site placement (with coverage fill).
+    pub sites: f64,
+    /// Reference scans, histograms, fit, sections.
+    pub compile: f64,
+}
+
+/// What a build produced.
+pub struct BuildOutput {
+    /// The section bytes, manifest last.
+    pub sections: Vec<(SectionKind, Vec<u8>)>,
+    /// The GVD graph.
+    pub gvd: GvdGraph,
+    /// The sites.
+    pub sites: Vec<SitePlacement>,
+    /// Coverage of the sites.
+    pub coverage: sites::Coverage,
+    /// Stored runtime parameters.
+    pub params: Params,
+    /// Logistic fit.
+    pub fit: FitReport,
+    /// Stage times.
+    pub times: StageTimes,
+    /// Reference scans (m) per site.
+    pub scans: Vec<Vec<f32>>,
+}
+
+fn hex(b: &[u8]) -> String {
+    b.iter().map(|x| format!("{x:02x}")).collect()
+}
+
+/// Builds the database sections of `src` with `cfg`. Deterministic: the
+/// same inputs and options give identical bytes whatever the thread count.
+pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> {
+    let params = cfg.params()?;
+    let grid = &src.grid;
+    let mut times = StageTimes::default();
+    let t = Instant::now();
+    let df = DistanceField::from_grid(grid, cfg.unknown_blocks);
+    times.edt = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let gopts = GvdOptions {
+        robot_radius_m: cfg.robot_radius,
+        unknown_is_obstacle: cfg.unknown_blocks,
+        ..GvdOptions::default()
+    };
+    let graph = gvd::extract(grid, &df, &gopts);
+    times.gvd = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let sopts = SiteOptions {
+        robot_radius_m: cfg.robot_radius,
+        edge_spacing_m: cfg.site_spacing,
+        coverage_range_m: cfg.coverage_range,
+        ..SiteOptions::default()
+    };
+    let blocked = grid.blocked_bits(cfg.unknown_blocks);
+    let bitgrid = refloc::raycast::BitGrid::new(grid.width, grid.height, &blocked).ok_or("grid too large")?;
+    let placed = sites::place_sites(grid, &df, &graph, &sopts);
+    let coverage = sites::coverage(grid, &bitgrid, &df, &placed, 0.25, cfg.coverage_range);
+    times.sites = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let site_in: Vec<SiteIn> = placed
+        .iter()
+        .map(|s| SiteIn {
+            x: s.x,
+            y: s.y,
+            clearance: s.clearance_m,
+            kind: s.kind as u32,
+            neighbours: s.neighbours.clone(),
+        })
+        .collect();
+    let input = CompileInput {
+        width: grid.width,
+        height: grid.height,
+        frame: grid.frame(),
+        blocked: &blocked,
+        sq_dist: &df.sq,
+        unknown_blocks: cfg.unknown_blocks,
+        free_cells: grid.free_count() as u64,
+        params,
+        fit_queries: cfg.fit_queries,
+        fit_seed: cfg.seed,
+    };
+    let Compiled {
+        mut sections,
+        params,
+        scans,
+        fit,
+    } = compile::compile(&input, &site_in)?;
+    times.compile = t.elapsed().as_secs_f64();
+    let manifest = serde_json::json!({
+        "generator": "mapc",
+        "mapc_version": env!("CARGO_PKG_VERSION"),
+        "format_version": refloc::format::FORMAT_VERSION,
+        "input": {
+            "yaml": src.yaml_path.as_ref().and_then(|p| p.file_name()).map(|n| n.to_string_lossy().into_owned()),
+            "yaml_sha256": src.yaml_sha256.map(|h| hex(&h)),
+            "image": src.image_path.file_name().map(|n| n.to_string_lossy().into_owned()),
+            "image_sha256": hex(&src.image_sha256),
+            "resolution": grid.resolution,
+            "origin": grid.origin,
+        },
+        "options": cfg,
+        "fit": fit,
+        "sites": placed.len(),
+        "coverage": coverage.fraction,
+    });
+    sections.push((SectionKind::Manifest, serde_json::to_vec_pretty(&manifest).map_err(|e| e.to_string())?));
+    Ok(BuildOutput {
+        sections,
+        gvd: graph,
+        sites: placed,
+        coverage,
+        params,
+        fit,
+        times,
+        scans,
+    })
+}
+
+/// SHA-256 of bytes, hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    hex(&sha2::Sha256::digest(bytes))
+}

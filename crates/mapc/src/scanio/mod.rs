@@ -1,0 +1,1683 @@
+//! Readers for the laser scans `mapc localize` takes, and a JSON Lines writer.
+//!
+//! Two input formats, one scan per line, plain or gzip-compressed
+//! ([`open_input`]):
+//!
+//! * **JSON Lines** ([`InputFormat::JsonLines`]): one object per line with the
+//!   `sensor_msgs/LaserScan` field names (`angle_min`, `angle_increment`,
+//!   `range_min`, `range_max`, `ranges`, optional `angle_max`), or `points`
+//!   (`[[x, y], ...]`, metres, sensor frame) instead of `ranges`; optional `id`
+//!   (string or number) and `truth` (`[x, y, theta]`, metres and radians).
+//!   `intensities`, `header` and unknown fields are ignored. Blank lines and
+//!   lines starting with `#` are skipped.
+//! * **CARMEN logs** ([`InputFormat::Carmen`]): `FLASER`, `RLASER` and
+//!   `ROBOTLASERk` lines are scans; `PARAM robot_front_laser_max` /
+//!   `robot_rear_laser_max` set the maximum range of the `FLASER` / `RLASER`
+//!   lines after them; every other keyword line (`ODOM`, `PARAM`, `SYNC`,
+//!   `TRUEPOS`, `RAWLASERk`, ...) and `#` comments are skipped. See
+//!   [`carmen_angle_increment`] for the beam geometry of `FLASER`/`RLASER`.
+//!
+//! This is a hostile-input reader: it never panics, never buffers a line
+//! beyond [`ReadOptions::max_line_bytes`], and never allocates from a count
+//! written in the input (beam counts are bounded by
+//! [`ReadOptions::max_beams`] and by the fields actually present). A
+//! malformed line yields one [`ScanError`] and reading goes on with the next
+//! line; only an I/O error (e.g. a truncated gzip stream) ends the stream.
+
+use std::f64::consts::{PI, TAU};
+use std::fmt;
+use std::fs::File;
+use std::io::{self, BufRead, BufReader, Read};
+use std::path::Path;
+use std::str::FromStr;
+
+use flate2::read::MultiGzDecoder;
+use serde::de::{self, DeserializeSeed, Deserializer, IgnoredAny, MapAccess, SeqAccess, Visitor};
+
+#[cfg(test)]
+mod tests;
+
+/// One scan read from the input.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InputScan {
+    /// The scan's name: the JSON `id` (a number is rendered as text), else
+    /// `"line N"` for JSON Lines, or `"scan K"` for CARMEN logs, where `K`
+    /// is the 0-based index of the line among the log's laser lines (the
+    /// `scan_index` of the shared `*-poses-in-map.txt` files).
+    pub id: String,
+    /// 1-based line number of the scan in the input.
+    pub line: usize,
+    /// The measurements.
+    pub data: ScanData,
+    /// Ground-truth sensor pose `[x (m), y (m), theta (rad)]` if the input
+    /// carries one: JSON `truth`, or the laser pose fields of a CARMEN line
+    /// (in the log's own frame, not the map's).
+    pub truth: Option<[f64; 3]>,
+}
+
+/// The measurements of one scan, in the sensor frame (x forward, y left,
+/// angles counter-clockwise from +x).
+#[derive(Clone, Debug, PartialEq)]
+pub enum ScanData {
+    /// Ranges at evenly spaced bearings: beam `k` points at
+    /// `angle_min + k * angle_increment`.
+    Ranges {
+        /// Bearing of the first beam (rad).
+        angle_min: f32,
+        /// Bearing step between consecutive beams (rad, non-zero, may be
+        /// negative).
+        angle_increment: f32,
+        /// Minimum valid range (m).
+        range_min: f32,
+        /// Maximum range of the sensor (m).
+        range_max: f32,
+        /// One range per beam (m); `NaN` for no return (or an invalid
+        /// reading). Never empty.
+        ranges: Vec<f32>,
+    },
+    /// Explicit end points.
+    Points {
+        /// End points `[x, y]` (m, sensor frame), all finite. Never empty.
+        points: Vec<[f32; 2]>,
+        /// Maximum range of the sensor (m).
+        range_max: f32,
+    },
+}
+
+impl ScanData {
+    /// Number of beams (`Ranges`, including no-return beams) or points.
+    pub fn len(&self) -> usize {
+        match self {
+            ScanData::Ranges { ranges, .. } => ranges.len(),
+            ScanData::Points { points, .. } => points.len(),
+        }
+    }
+
+    /// True if the scan has no beams or points (never the case for scans
+    /// returned by [`read_scans`]).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Why one input line could not be read as a scan.
+///
+/// Displays as `line 12 (id scan-3): ranges[4] is a string, expected a number
+/// or null`, or `line 12: ...` when the line's id is unknown.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ScanError {
+    /// The scan's id if it is known (the JSON `id`, or `"scan K"` for a
+    /// CARMEN laser line).
+    pub id: Option<String>,
+    /// 1-based line number in the input.
+    pub line: usize,
+    /// What is wrong, naming the field.
+    pub message: String,
+}
+
+impl fmt::Display for ScanError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.id {
+            Some(id) => write!(f, "line {} (id {}): {}", self.line, id, self.message),
+            None => write!(f, "line {}: {}", self.line, self.message),
+        }
+    }
+}
+
+impl std::error::Error for ScanError {}
+
+/// Input format of [`read_scans`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum InputFormat {
+    /// Decide from the first line that is neither blank nor a `#` comment:
+    /// `{` means JSON Lines, an uppercase keyword (`FLASER`, `PARAM`, ...)
+    /// means a CARMEN log. Lines before that decision that fit neither are
+    /// errors.
+    #[default]
+    Auto,
+    /// One JSON object per line (`sensor_msgs/LaserScan` field names).
+    JsonLines,
+    /// A CARMEN log.
+    Carmen,
+}
+
+impl FromStr for InputFormat {
+    type Err = String;
+
+    /// Parses `auto`, `jsonl` (or `json`, `jsonlines`) and `carmen`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "auto" => Ok(InputFormat::Auto),
+            "jsonl" | "json" | "jsonlines" | "json-lines" => Ok(InputFormat::JsonLines),
+            "carmen" | "log" => Ok(InputFormat::Carmen),
+            _ => Err(format!(
+                "unknown input format {s:?}: expected auto, jsonl or carmen"
+            )),
+        }
+    }
+}
+
+/// Options of [`read_scans`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReadOptions {
+    /// Field of view (rad) of CARMEN `FLASER`/`RLASER` lines, overriding the
+    /// default of pi (180 degrees). Must be in (0, 2 pi]. `ROBOTLASERk`
+    /// lines carry their own angles and ignore it.
+    pub fov: Option<f32>,
+    /// Maximum range (m) used when the input gives none: JSON records
+    /// without `range_max`, CARMEN `FLASER`/`RLASER` lines without an earlier
+    /// `PARAM robot_front_laser_max`/`robot_rear_laser_max`, `ROBOTLASERk`
+    /// lines whose `maximum_range` is not positive. Default 30.
+    pub range_max: f32,
+    /// Most beams (or points) one scan may have; a line with more is an
+    /// error naming the count. Default 100 000.
+    pub max_beams: usize,
+    /// Longest line (bytes, without its newline); a longer line is an error,
+    /// skipped without being buffered. Default 16 MiB.
+    pub max_line_bytes: usize,
+}
+
+impl Default for ReadOptions {
+    fn default() -> Self {
+        ReadOptions {
+            fov: None,
+            range_max: 30.0,
+            max_beams: 100_000,
+            max_line_bytes: 16 << 20,
+        }
+    }
+}
+
+/// Reads scans from `reader`, one item per scan line (streaming): a
+/// malformed line yields an `Err` item and the iteration goes on with the
+/// next line. Blank lines, `#` comments and non-laser CARMEN lines yield
+/// nothing. An I/O error yields one final `Err` item.
+pub fn read_scans(
+    reader: impl BufRead,
+    format: InputFormat,
+    opts: &ReadOptions,
+) -> impl Iterator<Item = Result<InputScan, ScanError>> {
+    Scans {
+        lines: LineReader::new(reader, opts.max_line_bytes),
+        format,
+        opts: *opts,
+        carmen: CarmenState::default(),
+    }
+}
+
+/// Opens `path` for reading: `-` is standard input; a path ending in `.gz`,
+/// or whose first bytes are the gzip magic `1f 8b`, is decompressed
+/// (concatenated gzip members included).
+pub fn open_input(path: &str) -> io::Result<Box<dyn BufRead>> {
+    if path == "-" {
+        return wrap_input(io::stdin(), false);
+    }
+    let file = File::open(path)?;
+    wrap_input(file, path.to_ascii_lowercase().ends_with(".gz"))
+}
+
+fn wrap_input<R: Read + 'static>(mut inner: R, gzip: bool) -> io::Result<Box<dyn BufRead>> {
+    let mut magic = [0u8; 2];
+    let mut got = 0;
+    while got < magic.len() {
+        match inner.read(&mut magic[got..]) {
+            Ok(0) => break,
+            Ok(k) => got += k,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    let joined = io::Cursor::new(magic[..got].to_vec()).chain(inner);
+    if gzip || magic[..got] == [0x1f, 0x8b] {
+        Ok(Box::new(BufReader::new(MultiGzDecoder::new(joined))))
+    } else {
+        Ok(Box::new(BufReader::new(joined)))
+    }
+}
+
+/// Reads a shared `*-poses-in-map.txt` file (plain or gzip): lines
+/// `scan_index ipc_timestamp logger_timestamp x y theta` (metres, radians,
+/// map frame), `#` comments and blank lines skipped. Returns
+/// `(scan_index, [x, y, theta])` in file order; a malformed line is an
+/// [`io::ErrorKind::InvalidData`] error naming the line.
+pub fn read_poses_in_map(path: impl AsRef<Path>) -> io::Result<Vec<(usize, [f64; 3])>> {
+    let path = path.as_ref();
+    let gz = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("gz"));
+    let reader = wrap_input(File::open(path)?, gz)?;
+    let bad = |line: usize, msg: String| {
+        io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("{}: line {line}: {msg}", path.display()),
+        )
+    };
+    let mut lines = LineReader::new(reader, 1 << 20);
+    let mut out = Vec::new();
+    while let Some((line, raw)) = lines.next_line() {
+        let text = match raw {
+            RawLine::Text(t) => t,
+            RawLine::TooLong { len, .. } => {
+                return Err(bad(line, format!("line is {len} bytes long")))
+            }
+            RawLine::Failed(e) => return Err(e),
+        };
+        let text = text.trim_ascii();
+        if text.is_empty() || text[0] == b'#' {
+            continue;
+        }
+        let count = tokens(text).count();
+        if count != 6 {
+            return Err(bad(
+                line,
+                format!("{count} fields; expected 6 (scan_index ipc_timestamp logger_timestamp x y theta)"),
+            ));
+        }
+        let mut it = tokens(text);
+        let index = it
+            .next()
+            .and_then(|t| std::str::from_utf8(t).ok())
+            .and_then(|s| s.parse::<usize>().ok())
+            .ok_or_else(|| bad(line, "scan_index is not a non-negative integer".into()))?;
+        let mut pose = [0.0; 3];
+        for (k, name) in ["ipc_timestamp", "logger_timestamp", "x", "y", "theta"]
+            .iter()
+            .enumerate()
+        {
+            let v = parse_f64(it.next()).filter(|v| v.is_finite());
+            let v = v.ok_or_else(|| bad(line, format!("{name} is not a finite number")))?;
+            if k >= 2 {
+                pose[k - 2] = v;
+            }
+        }
+        out.push((index, pose));
+    }
+    Ok(out)
+}
+
+/// One JSON Lines record for `scan` (no trailing newline), readable by
+/// [`read_scans`]: `NaN` and infinite ranges are written as `null`, `ranges`
+/// records also get the matching `angle_max`, and `truth` (if any) is
+/// written as `[x, y, theta]` (metres, radians). Reading the record back
+/// gives the same scan, bit for bit, as long as the ranges lie within
+/// `[range_min, range_max]` (others read back as `NaN`).
+pub fn scan_to_json(scan: &ScanData, id: &str, truth: Option<[f64; 3]>) -> String {
+    let mut s = String::with_capacity(64 + 10 * scan.len());
+    s.push_str("{\"id\":");
+    push_json_string(&mut s, id);
+    match scan {
+        ScanData::Ranges {
+            angle_min,
+            angle_increment,
+            range_min,
+            range_max,
+            ranges,
+        } => {
+            let last = ranges.len().saturating_sub(1) as f64;
+            let angle_max = (*angle_min as f64 + last * *angle_increment as f64) as f32;
+            for (name, v) in [
+                ("angle_min", *angle_min),
+                ("angle_max", angle_max),
+                ("angle_increment", *angle_increment),
+                ("range_min", *range_min),
+                ("range_max", *range_max),
+            ] {
+                s.push_str(",\"");
+                s.push_str(name);
+                s.push_str("\":");
+                push_f32(&mut s, v);
+            }
+            s.push_str(",\"ranges\":[");
+            for (k, &r) in ranges.iter().enumerate() {
+                if k > 0 {
+                    s.push(',');
+                }
+                push_f32(&mut s, r);
+            }
+            s.push(']');
+        }
+        ScanData::Points { points, range_max } => {
+            s.push_str(",\"range_max\":");
+            push_f32(&mut s, *range_max);
+            s.push_str(",\"points\":[");
+            for (k, p) in points.iter().enumerate() {
+                if k > 0 {
+                    s.push(',');
+                }
+                s.push('[');
+                push_f32(&mut s, p[0]);
+                s.push(',');
+                push_f32(&mut s, p[1]);
+                s.push(']');
+            }
+            s.push(']');
+        }
+    }
+    if let Some(t) = truth {
+        s.push_str(",\"truth\":[");
+        for (k, v) in t.iter().enumerate() {
+            if k > 0 {
+                s.push(',');
+            }
+            if v.is_finite() {
+                s.push_str(&format!("{v:?}"));
+            } else {
+                s.push_str("null");
+            }
+        }
+        s.push(']');
+    }
+    s.push('}');
+    s
+}
+
+fn push_f32(s: &mut String, v: f32) {
+    if v.is_finite() {
+        // `{:?}` is the shortest text that reads back as the same f32, and
+        // always valid JSON for finite values (`1.0`, `1e-7`, `-0.0`).
+        s.push_str(&format!("{v:?}"));
+    } else {
+        s.push_str("null");
+    }
+}
+
+fn push_json_string(s: &mut String, v: &str) {
+    s.push('"');
+    for c in v.chars() {
+        match c {
+            '"' => s.push_str("\\\""),
+            '\\' => s.push_str("\\\\"),
+            '\n' => s.push_str("\\n"),
+            '\r' => s.push_str("\\r"),
+            '\t' => s.push_str("\\t"),
+            c if (c as u32) < 0x20 || c == '\u{7f}' => s.push_str(&format!("\\u{:04x}", c as u32)),
+            c => s.push(c),
+        }
+    }
+    s.push('"');
+}
+
+// ---------------------------------------------------------------------------
+// Bounded line reader.
+
+/// Bytes of a too-long line kept to tell what it was (format sniffing,
+/// CARMEN keyword).
+const PREFIX_KEEP: usize = 64;
+
+/// Reads lines of at most `max` bytes; a longer line is reported (with its
+/// first [`PREFIX_KEEP`] bytes) and skipped up to its newline without
+/// buffering it.
+struct LineReader<R> {
+    inner: R,
+    max: usize,
+    buf: Vec<u8>,
+    line_no: usize,
+    finished: bool,
+}
+
+enum RawLine<'a> {
+    /// The line without its `\n` (and without a trailing `\r`).
+    Text(&'a [u8]),
+    /// The line was longer than the limit: its length (bytes) and first bytes.
+    TooLong { len: u64, prefix: &'a [u8] },
+    /// Reading failed; the reader is finished.
+    Failed(io::Error),
+}
+
+impl<R: BufRead> LineReader<R> {
+    fn new(inner: R, max: usize) -> Self {
+        LineReader {
+            inner,
+            max,
+            buf: Vec::new(),
+            line_no: 0,
+            finished: false,
+        }
+    }
+
+    /// The next line and its 1-based number, or `None` at the end.
+    fn next_line(&mut self) -> Option<(usize, RawLine<'_>)> {
+        if self.finished {
+            return None;
+        }
+        self.buf.clear();
+        let mut len: u64 = 0;
+        let mut overflow = false;
+        let mut started = false;
+        loop {
+            let avail = match self.inner.fill_buf() {
+                Ok(a) => a,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) => {
+                    self.finished = true;
+                    self.line_no += 1;
+                    return Some((self.line_no, RawLine::Failed(e)));
+                }
+            };
+            if avail.is_empty() {
+                if !started {
+                    self.finished = true;
+                    return None;
+                }
+                break;
+            }
+            started = true;
+            let (take, newline) = match avail.iter().position(|&b| b == b'\n') {
+                Some(i) => (i, true),
+                None => (avail.len(), false),
+            };
+            if !overflow && take <= self.max - self.buf.len() {
+                self.buf.extend_from_slice(&avail[..take]);
+            } else {
+                if !overflow {
+                    overflow = true;
+                    self.buf.truncate(PREFIX_KEEP);
+                }
+                let need = PREFIX_KEEP.saturating_sub(self.buf.len()).min(take);
+                self.buf.extend_from_slice(&avail[..need]);
+            }
+            len = len.saturating_add(take as u64);
+            self.inner.consume(take + usize::from(newline));
+            if newline {
+                break;
+            }
+        }
+        self.line_no += 1;
+        if overflow {
+            return Some((
+                self.line_no,
+                RawLine::TooLong {
+                    len,
+                    prefix: &self.buf,
+                },
+            ));
+        }
+        let mut text = &self.buf[..];
+        if let [rest @ .., b'\r'] = text {
+            text = rest;
+        }
+        Some((self.line_no, RawLine::Text(text)))
+    }
+}
+
+// ---------------------------------------------------------------------------
+// The scan iterator.
+
+struct Scans<R> {
+    lines: LineReader<R>,
+    format: InputFormat,
+    opts: ReadOptions,
+    carmen: CarmenState,
+}
+
+impl<R: BufRead> Iterator for Scans<R> {
+    type Item = Result<InputScan, ScanError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            let (line, raw) = self.lines.next_line()?;
+            let text = match raw {
+                RawLine::Text(t) => t,
+                RawLine::Failed(e) => {
+                    return Some(Err(ScanError {
+                        id: None,
+                        line,
+                        message: format!("read error: {e}"),
+                    }));
+                }
+                RawLine::TooLong { len, prefix } => {
+                    let prefix = strip_bom(line, prefix).trim_ascii_start();
+                    if prefix.first() == Some(&b'#') {
+                        continue; // an over-long comment
+                    }
+                    if self.format == InputFormat::Auto {
+                        if let Some(f) = sniff(prefix) {
+                            self.format = f;
+                        }
+                    }
+                    let id = match self.format {
+                        InputFormat::Carmen => self.carmen.count_if_laser(prefix),
+                        _ => None,
+                    };
+                    let message = format!(
+                        "line is {len} bytes long, more than max_line_bytes = {}",
+                        self.opts.max_line_bytes
+                    );
+                    return Some(Err(ScanError { id, line, message }));
+                }
+            };
+            let text = strip_bom(line, text).trim_ascii();
+            if text.is_empty() || text[0] == b'#' {
+                continue;
+            }
+            let format = match self.format {
+                InputFormat::Auto => match sniff(text) {
+                    Some(f) => {
+                        self.format = f;
+                        f
+                    }
+                    None => {
+                        let message = format!(
+                            "cannot tell the input format from {}: expected '{{' (JSON Lines) or an uppercase \
+                             CARMEN keyword such as FLASER",
+                            show(text)
+                        );
+                        return Some(Err(ScanError {
+                            id: None,
+                            line,
+                            message,
+                        }));
+                    }
+                },
+                f => f,
+            };
+            match format {
+                InputFormat::Carmen => match self.carmen.line(text, line, &self.opts) {
+                    Some(item) => return Some(item),
+                    None => continue,
+                },
+                _ => return Some(parse_json_line(text, line, &self.opts)),
+            }
+        }
+    }
+}
+
+fn strip_bom(line: usize, text: &[u8]) -> &[u8] {
+    match text {
+        [0xEF, 0xBB, 0xBF, rest @ ..] if line == 1 => rest,
+        _ => text,
+    }
+}
+
+fn sniff(text: &[u8]) -> Option<InputFormat> {
+    if text.first() == Some(&b'{') {
+        return Some(InputFormat::JsonLines);
+    }
+    let first = tokens(text).next()?;
+    is_keyword(first).then_some(InputFormat::Carmen)
+}
+
+/// A CARMEN message keyword: an uppercase letter, then uppercase letters,
+/// digits or underscores.
+fn is_keyword(t: &[u8]) -> bool {
+    matches!(t.first(), Some(b'A'..=b'Z'))
+        && t.iter()
+            .all(|b| b.is_ascii_uppercase() || b.is_ascii_digit() || *b == b'_')
+}
+
+/// Whitespace-separated fields of a line.
+fn tokens(text: &[u8]) -> impl Iterator<Item = &[u8]> {
+    text.split(|b| b.is_ascii_whitespace())
+        .filter(|t| !t.is_empty())
+}
+
+/// A short, escaped rendering of input bytes for error messages.
+fn show(t: &[u8]) -> String {
+    const MAX: usize = 24;
+    let cut = t.len() > MAX;
+    let s = String::from_utf8_lossy(&t[..t.len().min(MAX)]);
+    if cut {
+        format!("{:?}...", s)
+    } else {
+        format!("{:?}", s)
+    }
+}
+
+fn parse_f64(t: Option<&[u8]>) -> Option<f64> {
+    std::str::from_utf8(t?).ok()?.parse::<f64>().ok()
+}
+
+fn range_max_from_opts(opts: &ReadOptions) -> Result<f32, String> {
+    let r = opts.range_max;
+    if r.is_finite() && r > 0.0 {
+        Ok(r)
+    } else {
+        Err(format!(
+            "the default range_max ({r}) is not a positive number of metres"
+        ))
+    }
+}
+
+/// Largest |angle| (rad) accepted for a first bearing or a step.
+const ANGLE_LIMIT: f64 = TAU + 1e-3;
+
+/// Checks that `n` beams starting at `angle_min` with step `inc` make at
+/// most one turn. `names` are the two fields as the input calls them.
+fn check_angles(angle_min: f64, inc: f64, n: usize, names: [&str; 2]) -> Result<(), String> {
+    let [min_name, inc_name] = names;
+    if !angle_min.is_finite() || angle_min.abs() > ANGLE_LIMIT {
+        return Err(format!(
+            "{min_name} ({angle_min}) is not a finite angle within [-2 pi, 2 pi] rad"
+        ));
+    }
+    if !inc.is_finite() {
+        return Err(format!("{inc_name} is not finite"));
+    }
+    if inc == 0.0 {
+        return Err(format!("{inc_name} is 0"));
+    }
+    let span = n.saturating_sub(1) as f64 * inc.abs();
+    if span > TAU * (1.0 + 1e-4) + 1e-6 {
+        return Err(format!(
+            "{n} beams at angle_increment {inc} rad span {span:.4} rad, more than a full turn"
+        ));
+    }
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------
+// JSON Lines.
+
+/// Magnitudes from this on are taken as infinite (serde_json refuses numbers
+/// beyond f64 range; [`clamp_overflowing_numbers`] rewrites them to this).
+const JSON_HUGE: f64 = 1e308;
+
+/// Longest accepted `id` (bytes).
+const MAX_ID_BYTES: usize = 256;
+
+#[derive(Default)]
+struct RawRecord {
+    id: Option<String>,
+    angle_min: Option<f64>,
+    angle_max: Option<f64>,
+    angle_increment: Option<f64>,
+    range_min: Option<f64>,
+    range_max: Option<f64>,
+    ranges: Option<Vec<f32>>,
+    points: Option<Vec<[f32; 2]>>,
+    truth: Option<[f64; 3]>,
+    /// The first problem found (the line is an error).
+    problem: Option<String>,
+}
+
+impl RawRecord {
+    fn problem(&mut self, msg: String) {
+        if self.problem.is_none() {
+            self.problem = Some(msg);
+        }
+    }
+}
+
+fn parse_json_line(text: &[u8], line: usize, opts: &ReadOptions) -> Result<InputScan, ScanError> {
+    let mut raw = RawRecord::default();
+    let mut res = deserialize_record(text, &mut raw, opts.max_beams);
+    if matches!(&res, Err(e) if e.to_string().starts_with("number out of range")) {
+        if let Some(fixed) = clamp_overflowing_numbers(text) {
+            raw = RawRecord::default();
+            res = deserialize_record(&fixed, &mut raw, opts.max_beams);
+        }
+    }
+    if let Err(e) = res {
+        return Err(ScanError {
+            id: raw.id,
+            line,
+            message: json_error_message(&e),
+        });
+    }
+    if let Some(message) = raw.problem.take() {
+        return Err(ScanError {
+            id: raw.id,
+            line,
+            message,
+        });
+    }
+    let id = raw.id.take();
+    match build_json_scan(raw, opts) {
+        Ok((data, truth)) => Ok(InputScan {
+            id: id.unwrap_or_else(|| format!("line {line}")),
+            line,
+            data,
+            truth,
+        }),
+        Err(message) => Err(ScanError { id, line, message }),
+    }
+}
+
+fn deserialize_record(
+    text: &[u8],
+    raw: &mut RawRecord,
+    max_beams: usize,
+) -> Result<(), serde_json::Error> {
+    let mut de = serde_json::Deserializer::from_slice(text);
+    RecordSeed { raw, max_beams }.deserialize(&mut de)?;
+    de.end()
+}
+
+fn json_error_message(e: &serde_json::Error) -> String {
+    let s = e.to_string();
+    let base = match s.rfind(" at line ") {
+        Some(i) => &s[..i],
+        None => &s[..],
+    };
+    if e.column() > 0 {
+        format!("invalid JSON: {base} at column {}", e.column())
+    } else {
+        format!("invalid JSON: {base}")
+    }
+}
+
+/// Rewrites numbers outside f64 range (outside strings) as `±1e308`, which
+/// is no longer than any such number; `None` if there were none.
+fn clamp_overflowing_numbers(text: &[u8]) -> Option<Vec<u8>> {
+    let mut out = Vec::with_capacity(text.len());
+    let mut changed = false;
+    let mut in_string = false;
+    let mut i = 0;
+    while i < text.len() {
+        let b = text[i];
+        if in_string {
+            out.push(b);
+            if b == b'\\' {
+                if let Some(&next) = text.get(i + 1) {
+                    out.push(next);
+                    i += 1;
+                }
+            } else if b == b'"' {
+                in_string = false;
+            }
+            i += 1;
+        } else if b == b'"' {
+            in_string = true;
+            out.push(b);
+            i += 1;
+        } else if b == b'-' || b.is_ascii_digit() {
+            let start = i;
+            while i < text.len()
+                && matches!(text[i], b'0'..=b'9' | b'-' | b'+' | b'.' | b'e' | b'E')
+            {
+                i += 1;
+            }
+            let tok = &text[start..i];
+            match parse_f64(Some(tok)) {
+                Some(v) if v.is_infinite() => {
+                    out.extend_from_slice(if v < 0.0 { b"-1e308" } else { b"1e308" });
+                    changed = true;
+                }
+                _ => out.extend_from_slice(tok),
+            }
+        } else {
+            out.push(b);
+            i += 1;
+        }
+    }
+    changed.then_some(out)
+}
+
+fn build_json_scan(
+    raw: RawRecord,
+    opts: &ReadOptions,
+) -> Result<(ScanData, Option<[f64; 3]>), String> {
+    let range_max = match raw.range_max {
+        Some(r) if r.is_finite() && r > 0.0 && (r as f32).is_finite() => r as f32,
+        Some(r) => {
+            return Err(format!(
+                "range_max ({r}) is not a positive finite number of metres"
+            ))
+        }
+        None => range_max_from_opts(opts)?,
+    };
+    let data = match (raw.ranges, raw.points) {
+        (Some(_), Some(_)) => {
+            return Err("both ranges and points given; expected one of them".into())
+        }
+        (None, None) => return Err("missing field ranges (or points)".into()),
+        (Some(mut ranges), None) => {
+            let angle_min = raw.angle_min.ok_or("missing field angle_min")?;
+            let inc = raw.angle_increment.ok_or("missing field angle_increment")?;
+            if ranges.is_empty() {
+                return Err("ranges is empty".into());
+            }
+            check_angles(
+                angle_min,
+                inc,
+                ranges.len(),
+                ["angle_min", "angle_increment"],
+            )?;
+            if let Some(angle_max) = raw.angle_max {
+                let expected = angle_min + (ranges.len() - 1) as f64 * inc;
+                // Loose: some drivers write angle_min + n * increment.
+                if !angle_max.is_finite()
+                    || (angle_max - expected).abs() > inc.abs() * (1.0 + 1e-3) + 1e-6
+                {
+                    return Err(format!(
+                        "angle_max ({angle_max}) disagrees with angle_min + (n - 1) * angle_increment = {expected} \
+                         (n = {}) by more than one increment",
+                        ranges.len()
+                    ));
+                }
+            }
+            let range_min = match raw.range_min {
+                None => 0.0,
+                Some(r) if r.is_finite() && r >= 0.0 && (r as f32) < range_max => r as f32,
+                Some(r) => {
+                    return Err(format!(
+                        "range_min ({r}) is not a finite number of metres in [0, range_max)"
+                    ));
+                }
+            };
+            for r in ranges.iter_mut() {
+                if !(*r > 0.0 && *r >= range_min && *r <= range_max) {
+                    *r = f32::NAN;
+                }
+            }
+            ScanData::Ranges {
+                angle_min: angle_min as f32,
+                angle_increment: inc as f32,
+                range_min,
+                range_max,
+                ranges,
+            }
+        }
+        (None, Some(points)) => {
+            if points.is_empty() {
+                return Err("points is empty".into());
+            }
+            ScanData::Points { points, range_max }
+        }
+    };
+    Ok((data, raw.truth))
+}
+
+/// A JSON value where a number is expected.
+enum Scalar {
+    Num(f64),
+    Null,
+    /// Anything else, as "a string", "an array", ...
+    Other(&'static str),
+}
+
+/// Implements the `visit_*` methods of a `deserialize_any` visitor for the
+/// JSON kinds it does not handle itself, mapping each to `$f(self, kind)`;
+/// arrays and objects are drained first.
+macro_rules! other_kinds {
+    ($f:expr; $($kind:ident),*) => {
+        $(other_kinds!(@one $f; $kind);)*
+    };
+    (@one $f:expr; bool) => {
+        fn visit_bool<E: de::Error>(self, _: bool) -> Result<Self::Value, E> { Ok($f(self, "a boolean")) }
+    };
+    (@one $f:expr; num) => {
+        fn visit_i64<E: de::Error>(self, _: i64) -> Result<Self::Value, E> { Ok($f(self, "a number")) }
+        fn visit_u64<E: de::Error>(self, _: u64) -> Result<Self::Value, E> { Ok($f(self, "a number")) }
+        fn visit_f64<E: de::Error>(self, _: f64) -> Result<Self::Value, E> { Ok($f(self, "a number")) }
+    };
+    (@one $f:expr; str) => {
+        fn visit_str<E: de::Error>(self, _: &str) -> Result<Self::Value, E> { Ok($f(self, "a string")) }
+    };
+    (@one $f:expr; null) => {
+        fn visit_unit<E: de::Error>(self) -> Result<Self::Value, E> { Ok($f(self, "null")) }
+    };
+    (@one $f:expr; seq) => {
+        fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
+            while seq.next_element::<IgnoredAny>()?.is_some() {}
+            Ok($f(self, "an array"))
+        }
+    };
+    (@one $f:expr; map) => {
+        fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+            while map.next_entry::<IgnoredAny, IgnoredAny>()?.is_some() {}
+            Ok($f(self, "an object"))
+        }
+    };
+}
+
+fn huge_to_inf(v: f64) -> f64 {
+    if v.abs() >= JSON_HUGE {
+        v.signum() * f64::INFINITY
+    } else {
+        v
+    }
+}
+
+impl<'de> de::Deserialize<'de> for Scalar {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = Scalar;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a number or null")
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> Result<Scalar, E> {
+                Ok(Scalar::Num(v as f64))
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> Result<Scalar, E> {
+                Ok(Scalar::Num(v as f64))
+            }
+            fn visit_f64<E: de::Error>(self, v: f64) -> Result<Scalar, E> {
+                Ok(Scalar::Num(huge_to_inf(v)))
+            }
+            fn visit_unit<E: de::Error>(self) -> Result<Scalar, E> {
+                Ok(Scalar::Null)
+            }
+            other_kinds!(|_, k| Scalar::Other(k); bool, str, seq, map);
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// The JSON `id`.
+enum IdValue {
+    Text(String),
+    Null,
+    Other(&'static str),
+}
+
+impl<'de> de::Deserialize<'de> for IdValue {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = IdValue;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a string or a number")
+            }
+            fn visit_str<E: de::Error>(self, v: &str) -> Result<IdValue, E> {
+                Ok(IdValue::Text(v.to_owned()))
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> Result<IdValue, E> {
+                Ok(IdValue::Text(v.to_string()))
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> Result<IdValue, E> {
+                Ok(IdValue::Text(v.to_string()))
+            }
+            fn visit_f64<E: de::Error>(self, v: f64) -> Result<IdValue, E> {
+                Ok(IdValue::Text(v.to_string()))
+            }
+            fn visit_unit<E: de::Error>(self) -> Result<IdValue, E> {
+                Ok(IdValue::Null)
+            }
+            other_kinds!(|_, k| IdValue::Other(k); bool, seq, map);
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// An element of `points`: `Ok([x, y])` or what it was instead.
+struct PointValue(Result<[f64; 2], &'static str>);
+
+impl<'de> de::Deserialize<'de> for PointValue {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = PointValue;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("an [x, y] pair")
+            }
+            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<PointValue, A::Error> {
+                let (v, n) = read_numbers::<A, 2>(&mut seq)?;
+                Ok(PointValue(match v {
+                    _ if n != 2 => Err("an array of length other than 2"),
+                    Some(xy) => Ok(xy),
+                    None => Err("an array with a non-number"),
+                }))
+            }
+            other_kinds!(|_, k| PointValue(Err(k)); bool, num, str, null, map);
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// Reads the rest of `seq`, returning its first `N` elements if they are
+/// all numbers, and the total element count.
+fn read_numbers<'de, A: SeqAccess<'de>, const N: usize>(
+    seq: &mut A,
+) -> Result<(Option<[f64; N]>, usize), A::Error> {
+    let mut out = [0.0; N];
+    let mut all_numbers = true;
+    let mut n = 0usize;
+    while n < N {
+        match seq.next_element::<Scalar>()? {
+            Some(Scalar::Num(v)) => out[n] = v,
+            Some(_) => all_numbers = false,
+            None => break,
+        }
+        n += 1;
+    }
+    if n == N {
+        while seq.next_element::<IgnoredAny>()?.is_some() {
+            n = n.saturating_add(1);
+        }
+    }
+    Ok((all_numbers.then_some(out), n))
+}
+
+/// The JSON `truth`.
+enum TruthValue {
+    Pose([f64; 3]),
+    Null,
+    Bad(&'static str),
+}
+
+impl<'de> de::Deserialize<'de> for TruthValue {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = TruthValue;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("[x, y, theta]")
+            }
+            fn visit_unit<E: de::Error>(self) -> Result<TruthValue, E> {
+                Ok(TruthValue::Null)
+            }
+            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<TruthValue, A::Error> {
+                let (v, n) = read_numbers::<A, 3>(&mut seq)?;
+                Ok(match v {
+                    _ if n != 3 => TruthValue::Bad("an array of length other than 3"),
+                    Some(p) => TruthValue::Pose(p),
+                    None => TruthValue::Bad("an array with a non-number"),
+                })
+            }
+            other_kinds!(|_, k| TruthValue::Bad(k); bool, num, str, map);
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// Reads `ranges` (at most `max_beams` kept) or `points` into the record.
+struct ListSeed<'a> {
+    raw: &'a mut RawRecord,
+    max_beams: usize,
+    points: bool,
+}
+
+impl ListSeed<'_> {
+    fn name(&self) -> &'static str {
+        if self.points {
+            "points"
+        } else {
+            "ranges"
+        }
+    }
+
+    fn not_a_list(self, kind: &str) {
+        let msg = if self.points {
+            format!("points is {kind}, expected an array of [x, y] pairs")
+        } else {
+            format!("ranges is {kind}, expected an array of numbers or null")
+        };
+        self.raw.problem(msg);
+    }
+}
+
+impl<'de> DeserializeSeed<'de> for ListSeed<'_> {
+    type Value = ();
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_any(self)
+    }
+}
+
+impl<'de> Visitor<'de> for ListSeed<'_> {
+    type Value = ();
+
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "an array ({})", self.name())
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
+        let mut count = 0usize;
+        let mut problem: Option<String> = None;
+        if self.points {
+            let mut points = Vec::new();
+            while count < self.max_beams {
+                let Some(PointValue(p)) = seq.next_element::<PointValue>()? else {
+                    break;
+                };
+                match p {
+                    Ok([x, y]) if (x as f32).is_finite() && (y as f32).is_finite() => {
+                        points.push([x as f32, y as f32]);
+                    }
+                    Ok(_) => {
+                        problem.get_or_insert_with(|| format!("points[{count}] is not finite"));
+                    }
+                    Err(kind) => {
+                        problem.get_or_insert_with(|| {
+                            format!("points[{count}] is {kind}, expected an [x, y] pair of numbers")
+                        });
+                    }
+                }
+                count += 1;
+            }
+            self.raw.points = Some(points);
+        } else {
+            let mut ranges = Vec::new();
+            while count < self.max_beams {
+                match seq.next_element::<Scalar>()? {
+                    None => break,
+                    Some(Scalar::Num(v)) => ranges.push(v as f32),
+                    Some(Scalar::Null) => ranges.push(f32::NAN),
+                    Some(Scalar::Other(kind)) => {
+                        problem.get_or_insert_with(|| {
+                            format!("ranges[{count}] is {kind}, expected a number or null")
+                        });
+                    }
+                }
+                count += 1;
+            }
+            self.raw.ranges = Some(ranges);
+        }
+        let mut total = count;
+        while seq.next_element::<IgnoredAny>()?.is_some() {
+            total = total.saturating_add(1);
+        }
+        if total > self.max_beams {
+            self.raw.problem(format!(
+                "{} has {total} entries, more than max_beams = {}",
+                self.name(),
+                self.max_beams
+            ));
+        }
+        if let Some(p) = problem {
+            self.raw.problem(p);
+        }
+        Ok(())
+    }
+
+    other_kinds!(ListSeed::not_a_list; bool, num, str, null, map);
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Field {
+    Id,
+    AngleMin,
+    AngleMax,
+    AngleIncrement,
+    RangeMin,
+    RangeMax,
+    Ranges,
+    Points,
+    Truth,
+    Other,
+}
+
+impl Field {
+    fn name(self) -> &'static str {
+        match self {
+            Field::Id => "id",
+            Field::AngleMin => "angle_min",
+            Field::AngleMax => "angle_max",
+            Field::AngleIncrement => "angle_increment",
+            Field::RangeMin => "range_min",
+            Field::RangeMax => "range_max",
+            Field::Ranges => "ranges",
+            Field::Points => "points",
+            Field::Truth => "truth",
+            Field::Other => "?",
+        }
+    }
+}
+
+impl<'de> de::Deserialize<'de> for Field {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl Visitor<'_> for V {
+            type Value = Field;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a field name")
+            }
+            fn visit_str<E: de::Error>(self, v: &str) -> Result<Field, E> {
+                Ok(match v {
+                    "id" => Field::Id,
+                    "angle_min" => Field::AngleMin,
+                    "angle_max" => Field::AngleMax,
+                    "angle_increment" => Field::AngleIncrement,
+                    "range_min" => Field::RangeMin,
+                    "range_max" => Field::RangeMax,
+                    "ranges" => Field::Ranges,
+                    "points" => Field::Points,
+                    "truth" => Field::Truth,
+                    _ => Field::Other,
+                })
+            }
+        }
+        d.deserialize_str(V)
+    }
+}
+
+/// Reads one JSON object into a [`RawRecord`], recording the first problem
+/// with a field instead of failing, so that the message can name the field.
+struct RecordSeed<'a> {
+    raw: &'a mut RawRecord,
+    max_beams: usize,
+}
+
+impl<'de> DeserializeSeed<'de> for RecordSeed<'_> {
+    type Value = ();
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_map(self)
+    }
+}
+
+impl<'de> Visitor<'de> for RecordSeed<'_> {
+    type Value = ();
+
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("a JSON object (one scan per line)")
+    }
+
+    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
+        let raw = self.raw;
+        let mut seen = 0u32;
+        while let Some(field) = map.next_key::<Field>()? {
+            if field == Field::Other {
+                map.next_value::<IgnoredAny>()?;
+                continue;
+            }
+            let bit = 1u32 << (field as u32);
+            if seen & bit != 0 {
+                raw.problem(format!("field {} appears more than once", field.name()));
+                map.next_value::<IgnoredAny>()?;
+                continue;
+            }
+            seen |= bit;
+            match field {
+                Field::Id => match map.next_value::<IdValue>()? {
+                    IdValue::Text(s) if s.len() > MAX_ID_BYTES => {
+                        raw.problem(format!(
+                            "id is {} bytes long, more than {MAX_ID_BYTES}",
+                            s.len()
+                        ));
+                    }
+                    IdValue::Text(s) if s.chars().any(char::is_control) => {
+                        raw.problem("id contains a control character".into());
+                    }
+                    IdValue::Text(s) => raw.id = Some(s),
+                    IdValue::Null => {}
+                    IdValue::Other(kind) => {
+                        raw.problem(format!("id is {kind}, expected a string or a number"))
+                    }
+                },
+                Field::Ranges | Field::Points => {
+                    let points = field == Field::Points;
+                    map.next_value_seed(ListSeed {
+                        raw: &mut *raw,
+                        max_beams: self.max_beams,
+                        points,
+                    })?;
+                }
+                Field::Truth => match map.next_value::<TruthValue>()? {
+                    TruthValue::Pose(p) if p.iter().all(|v| v.is_finite()) => raw.truth = Some(p),
+                    TruthValue::Pose(_) => raw.problem("truth is not finite".into()),
+                    TruthValue::Null => {}
+                    TruthValue::Bad(kind) => {
+                        raw.problem(format!(
+                            "truth is {kind}, expected [x, y, theta] (metres, radians)"
+                        ));
+                    }
+                },
+                _ => {
+                    let value = match map.next_value::<Scalar>()? {
+                        Scalar::Num(v) => Some(v),
+                        Scalar::Null
+                            if matches!(field, Field::AngleMin | Field::AngleIncrement) =>
+                        {
+                            raw.problem(format!("{} is null, expected a number", field.name()));
+                            None
+                        }
+                        Scalar::Null => None,
+                        Scalar::Other(kind) => {
+                            raw.problem(format!("{} is {kind}, expected a number", field.name()));
+                            None
+                        }
+                    };
+                    let slot = match field {
+                        Field::AngleMin => &mut raw.angle_min,
+                        Field::AngleMax => &mut raw.angle_max,
+                        Field::AngleIncrement => &mut raw.angle_increment,
+                        Field::RangeMin => &mut raw.range_min,
+                        _ => &mut raw.range_max,
+                    };
+                    *slot = value;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+// ---------------------------------------------------------------------------
+// CARMEN logs.
+
+/// The bearing step (rad) of an `FLASER`/`RLASER` line of `n` beams over a
+/// field of view of `fov` rad (pi unless [`ReadOptions::fov`] says
+/// otherwise); the first beam is at `-fov / 2` (front laser).
+///
+/// These lines do not state their angles. The rule: the step is the
+/// standard SICK resolution `r` of 1, 0.5 or 0.25 degrees (tried in that
+/// order) for which `n` beams fill the field of view to within one step,
+/// i.e. `(n - 1) r <= fov <= n r` (`n = fov / r` or `fov / r + 1`); if none
+/// fits, `fov / (n - 1)` (`fov` for a single beam). With `fov = pi` this
+/// gives 1 degree for n = 180 and 181 and 0.5 degree for n = 360 and 361,
+/// as CARMEN's own `carmen_laser_guess_angle_increment` does (CARMEN also
+/// uses 0.25 degree for 400 and 401 beams over 180 degrees, which this rule
+/// gives only with `fov` = 100 degrees, the SICK mode those counts come
+/// from).
+pub fn carmen_angle_increment(n: usize, fov: f64) -> f64 {
+    let nf = n as f64;
+    for deg in [1.0f64, 0.5, 0.25] {
+        let r = deg.to_radians();
+        let tol = 1e-3 * r;
+        if nf * r >= fov - tol && (nf - 1.0) * r <= fov + tol {
+            return r;
+        }
+    }
+    if n > 1 {
+        fov / (nf - 1.0)
+    } else {
+        fov
+    }
+}
+
+#[derive(Default)]
+struct CarmenState {
+    /// Laser lines seen so far (the next scan's index).
+    scans: usize,
+    /// `PARAM robot_front_laser_max` (m).
+    front_max: Option<f32>,
+    /// `PARAM robot_rear_laser_max` (m).
+    rear_max: Option<f32>,
+}
+
+#[derive(Clone, Copy)]
+enum LaserKind {
+    Front,
+    Rear,
+    Robot,
+}
+
+fn laser_kind(keyword: &[u8]) -> Option<LaserKind> {
+    match keyword {
+        b"FLASER" => Some(LaserKind::Front),
+        b"RLASER" => Some(LaserKind::Rear),
+        [b'R', b'O', b'B', b'O', b'T', b'L', b'A', b'S', b'E', b'R', rest @ ..]
+            if !rest.is_empty() && rest.iter().all(u8::is_ascii_digit) =>
+        {
+            Some(LaserKind::Robot)
+        }
+        _ => None,
+    }
+}
+
+impl CarmenState {
+    /// Counts a (too long) line as a scan if it starts with a laser keyword,
+    /// returning its id.
+    fn count_if_laser(&mut self, prefix: &[u8]) -> Option<String> {
+        let kw = tokens(prefix).next()?;
+        laser_kind(kw)?;
+        let k = self.scans;
+        self.scans += 1;
+        Some(format!("scan {k}"))
+    }
+
+    /// Handles one non-blank, non-comment line: `None` if it is not a scan.
+    fn line(
+        &mut self,
+        text: &[u8],
+        line: usize,
+        opts: &ReadOptions,
+    ) -> Option<Result<InputScan, ScanError>> {
+        let kw = tokens(text).next()?;
+        let Some(kind) = laser_kind(kw) else {
+            if kw == b"PARAM" {
+                self.param(text);
+                return None;
+            }
+            if is_keyword(kw) {
+                return None;
+            }
+            let message = format!(
+                "not a CARMEN line: {} is not an uppercase keyword such as FLASER",
+                show(kw)
+            );
+            return Some(Err(ScanError {
+                id: None,
+                line,
+                message,
+            }));
+        };
+        let id = format!("scan {}", self.scans);
+        self.scans += 1;
+        let name = String::from_utf8_lossy(kw);
+        let res = match kind {
+            LaserKind::Front => parse_old_laser(text, &name, false, self.front_max, opts),
+            LaserKind::Rear => parse_old_laser(text, &name, true, self.rear_max, opts),
+            LaserKind::Robot => parse_robot_laser(text, &name, opts),
+        };
+        Some(match res {
+            Ok((data, pose)) => Ok(InputScan {
+                id,
+                line,
+                data,
+                truth: Some(pose),
+            }),
+            Err(message) => Err(ScanError {
+                id: Some(id),
+                line,
+                message,
+            }),
+        })
+    }
+
+    fn param(&mut self, text: &[u8]) {
+        let mut it = tokens(text).skip(1);
+        let slot = match it.next() {
+            Some(b"robot_front_laser_max") => &mut self.front_max,
+            Some(b"robot_rear_laser_max") => &mut self.rear_max,
+            _ => return,
+        };
+        if let Some(v) = parse_f64(it.next()) {
+            if v.is_finite() && v > 0.0 && (v as f32).is_finite() {
+                *slot = Some(v as f32);
+            }
+        }
+    }
+}
+
+/// Parses a count field: a non-negative decimal integer (saturating at
+/// `usize::MAX`), checked against `max` when `max` is given.
+fn parse_count(
+    t: Option<&[u8]>,
+    name: &str,
+    what: &str,
+    max: Option<usize>,
+) -> Result<usize, String> {
+    let t = t.ok_or_else(|| format!("{name} line ends before its {what}"))?;
+    let digits = match t {
+        [b'-', rest @ ..] if !rest.is_empty() && rest.iter().all(u8::is_ascii_digit) => {
+            return Err(format!("{name} {what} {} is negative", show(t)));
+        }
+        [b'+', rest @ ..] => rest,
+        _ => t,
+    };
+    if digits.is_empty() || !digits.iter().all(u8::is_ascii_digit) {
+        return Err(format!(
+            "{name} {what} {} is not a non-negative integer",
+            show(t)
+        ));
+    }
+    let n = digits.iter().try_fold(0usize, |n, &d| {
+        n.checked_mul(10)?.checked_add(usize::from(d - b'0'))
+    });
+    let n = n.unwrap_or(usize::MAX);
+    if let Some(max) = max {
+        if n > max {
+            let shown = String::from_utf8_lossy(&digits[..digits.len().min(40)]).into_owned();
+            return Err(format!(
+                "{name} has {shown} beams, more than max_beams = {max}"
+            ));
+        }
+        if n == 0 {
+            return Err(format!("{name} has 0 beams"));
+        }
+    }
+    Ok(n)
+}
+
+fn parse_number<'a>(
+    it: &mut impl Iterator<Item = &'a [u8]>,
+    name: &str,
+    what: &str,
+) -> Result<f64, String> {
+    let t = it
+        .next()
+        .ok_or_else(|| format!("{name} line ends before its {what}"))?;
+    match parse_f64(Some(t)) {
+        Some(v) if v.is_finite() => Ok(v),
+        _ => Err(format!("{name} {what} {} is not a finite number", show(t))),
+    }
+}
+
+/// Reads `n` range fields: `NaN` for values that are not finite, not
+/// positive, or at least `max` (no return).
+fn parse_ranges<'a>(
+    it: &mut impl Iterator<Item = &'a [u8]>,
+    n: usize,
+    max: f32,
+    name: &str,
+) -> Result<Vec<f32>, String> {
+    let mut ranges = Vec::with_capacity(n);
+    for i in 0..n {
+        let t = it
+            .next()
+            .ok_or_else(|| format!("{name} line ends before range {i}"))?;
+        let r = parse_f64(Some(t))
+            .ok_or_else(|| format!("{name} range {i} ({}) is not a number", show(t)))?;
+        let r32 = r as f32;
+        ranges.push(if r32.is_finite() && r32 > 0.0 && r32 < max {
+            r32
+        } else {
+            f32::NAN
+        });
+    }
+    Ok(ranges)
+}
+
+fn parse_pose<'a>(
+    it: &mut impl Iterator<Item = &'a [u8]>,
+    name: &str,
+    what: &str,
+) -> Result<[f64; 3], String> {
+    Ok([
+        parse_number(it, name, &format!("{what} x"))?,
+        parse_number(it, name, &format!("{what} y"))?,
+        parse_number(it, name, &format!("{what} theta"))?,
+    ])
+}
+
+/// `FLASER`/`RLASER n r1..rn x y theta odom_x odom_y odom_theta
+/// ipc_timestamp hostname logger_timestamp` (the last three may be missing
+/// in old logs). The rear laser looks backwards: its first beam is at
+/// `pi - fov / 2` (pi/2 for the default fov) in the frame of the pose on its
+/// line.
+fn parse_old_laser(
+    text: &[u8],
+    name: &str,
+    rear: bool,
+    param_max: Option<f32>,
+    opts: &ReadOptions,
+) -> Result<(ScanData, [f64; 3]), String> {
+    let total = tokens(text).count();
+    let mut it = tokens(text).skip(1);
+    let n = parse_count(it.next(), name, "beam count", Some(opts.max_beams))?;
+    let after = total - 2;
+    let (lo, hi) = (n.saturating_add(6), n.saturating_add(9));
+    if after < lo || after > hi {
+        return Err(format!(
+            "{name} says n = {n} beams but {after} fields follow the count; expected {lo} to {hi} \
+             (n ranges, laser pose, odometry pose, timestamps and host)"
+        ));
+    }
+    let fov = match opts.fov {
+        None => PI,
+        Some(f) if f.is_finite() && f > 0.0 && f as f64 <= ANGLE_LIMIT => f as f64,
+        Some(f) => {
+            return Err(format!(
+                "the field of view override ({f} rad) is not in (0, 2 pi]"
+            ))
+        }
+    };
+    let inc = carmen_angle_increment(n, fov);
+    let angle_min = if rear { PI - fov / 2.0 } else { -fov / 2.0 };
+    let max = match param_max {
+        Some(m) => m,
+        None => range_max_from_opts(opts)?,
+    };
+    let ranges = parse_ranges(&mut it, n, max, name)?;
+    let pose = parse_pose(&mut it, name, "laser pose")?;
+    let data = ScanData::Ranges {
+        angle_min: angle_min as f32,
+        angle_increment: inc as f32,
+        range_min: 0.0,
+        range_max: max,
+        ranges,
+    };
+    Ok((data, pose))
+}
+
+/// `ROBOTLASERk laser_type start_angle field_of_view angular_resolution
+/// maximum_range accuracy remission_mode num_readings r1..rn num_remissions
+/// rem1..remk laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv
+/// forward_safety side_safety turn_axis timestamp host logger_timestamp`
+/// (the fields after the robot pose may be missing).
+fn parse_robot_laser(
+    text: &[u8],
+    name: &str,
+    opts: &ReadOptions,
+) -> Result<(ScanData, [f64; 3]), String> {
+    let total = tokens(text).count();
+    let mut it = tokens(text).skip(1);
+    let _laser_type = it
+        .next()
+        .ok_or_else(|| format!("{name} line ends before its laser_type"))?;
+    let start = parse_number(&mut it, name, "start_angle")?;
+    let _fov = parse_number(&mut it, name, "field_of_view")?;
+    let inc = parse_number(&mut it, name, "angular_resolution")?;
+    let max_range = parse_number(&mut it, name, "maximum_range")?;
+    let _accuracy = parse_number(&mut it, name, "accuracy")?;
+    let _remission_mode = it
+        .next()
+        .ok_or_else(|| format!("{name} line ends before its remission_mode"))?;
+    let n = parse_count(it.next(), name, "num_readings", Some(opts.max_beams))?;
+    let after = total - 9;
+    if after <= n {
+        return Err(format!(
+            "{name} says num_readings = {n} but only {after} fields follow; expected at least {}",
+            n.saturating_add(7)
+        ));
+    }
+    check_angles(
+        start,
+        inc,
+        n,
+        [
+            &format!("{name} start_angle"),
+            &format!("{name} angular_resolution"),
+        ],
+    )?;
+    let max = if max_range > 0.0 && (max_range as f32).is_finite() {
+        max_range as f32
+    } else {
+        range_max_from_opts(opts)?
+    };
+    let ranges = parse_ranges(&mut it, n, max, name)?;
+    let k = parse_count(it.next(), name, "num_remissions", None)?;
+    let rest = after - n - 1;
+    if k > rest || rest - k < 6 || rest - k > 14 {
+        return Err(format!(
+            "{name} says num_remissions = {k} but {rest} fields follow it; expected {} to {} \
+             (remissions, laser pose, robot pose, velocities, timestamps and host)",
+            k.saturating_add(6),
+            k.saturating_add(14)
+        ));
+    }
+    for _ in 0..k {
+        it.next();
+    }
+    let pose = parse_pose(&mut it, name, "laser pose")?;
+    let data = ScanData::Ranges {
+        angle_min: start as f32,
+        angle_increment: inc as f32,
+        range_min: 0.0,
+        range_max: max,
+        ranges,
+    };
+    Ok((data, pose))
+}
