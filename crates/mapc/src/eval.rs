@@ -70,8 +70,10 @@ pub struct Trial {
     pub err_theta: Option<f64>,
     /// Coarse rank of the correct site (None: no site in line of sight).
     pub correct_rank: Option<usize>,
-    /// Candidates examined.
+    /// Candidates examined by the fine stage (fewer than `nc` after an early stop).
     pub candidates: usize,
+    /// N_C: the coarse stage's candidate count for this scan.
+    pub nc: usize,
     /// Query time (microseconds).
     pub time_us: u64,
     /// Error message when localization returned an error.
@@ -116,7 +118,7 @@ pub struct Summary {
     pub median_time_us: f64,
     /// Mean query time (us).
     pub mean_time_us: f64,
-    /// Share of trials whose correct site was among the examined candidates.
+    /// Share of trials (with a site in sight) whose correct site was among the N_C coarse candidates.
     pub correct_site_recall: f64,
 }
 
@@ -160,7 +162,7 @@ pub fn summarize(trials: &[Trial]) -> Summary {
     s.mean_time_us = times.iter().sum::<f64>() / n as f64;
     let with_site = trials.iter().filter(|t| t.correct_rank.is_some()).count().max(1);
     s.correct_site_recall =
-        trials.iter().filter(|t| matches!(t.correct_rank, Some(r) if r < t.candidates)).count() as f64 / with_site as f64;
+        trials.iter().filter(|t| matches!(t.correct_rank, Some(r) if r < t.nc)).count() as f64 / with_site as f64;
     s
 }
 
@@ -295,6 +297,14 @@ pub fn coarse_rank<D: AsRef<[u8]>>(db: &RefDb<D>, hist: &[f32], site: usize) -> 
         .count()
 }
 
+/// N_C for an input histogram, by the database's rule.
+pub fn coarse_nc<D: AsRef<[u8]>>(db: &RefDb<D>, hist: &[f32]) -> usize {
+    let p = db.params();
+    let mut top = vec![refloc::coarse::Ranked::default(); p.nc_max as usize];
+    let n = refloc::coarse::rank_top(hist, (0..db.site_count()).map(|s| db.hist(s)), &mut top);
+    refloc::coarse::candidate_count(&top[..n], p.nc_min as usize, p.nc_max as usize, p.nc_margin)
+}
+
 /// Histogram of an input scan exactly as the localizer computes it.
 pub fn input_histogram(points: &[[f32; 2]], wrap: bool, params: &Params) -> Vec<f32> {
     let p = params.max_points as usize;
@@ -397,6 +407,7 @@ pub fn run_e4<D: AsRef<[u8]> + Sync>(
                     err_theta: None,
                     correct_rank: None,
                     candidates: 0,
+                    nc: 0,
                     time_us,
                     error: None,
                 };
@@ -426,6 +437,7 @@ pub fn run_e4<D: AsRef<[u8]> + Sync>(
                         let full = spec.fov >= 2.0 * std::f32::consts::PI - 1e-3;
                         let h = input_histogram(&pts, full, db.params());
                         trial.correct_rank = Some(coarse_rank(db, &h, site));
+                        trial.nc = coarse_nc(db, &h);
                     }
                 }
                 progress();

@@ -20,4 +20,5 @@ pub mod scanio;
 pub mod sim;
 pub mod sites;
 pub mod synth;
+pub mod testdata;
 pub mod writer;

@@ -64,3 +64,6 @@ pub use localize::{
 #[cfg(feature = "mmap")]
 pub use mmap::{open_mmap, OpenError};
 pub use params::{Params, Selection, SensorModel};
+
+#[cfg(test)]
+mod tests;

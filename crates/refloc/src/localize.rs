@@ -390,6 +390,7 @@ pub fn localize<'s, D: AsRef<[u8]>>(
     let frame = db.frame();
     let offset_inv = s.offset.inverse();
     let mut best: Option<usize> = None;
+    let mut examined = nc;
     for (c, r) in top[..nc].iter().enumerate() {
         let site = r.site as usize;
         let mut cand = Candidate {
@@ -456,9 +457,18 @@ pub fn localize<'s, D: AsRef<[u8]>>(
             if better {
                 best = Some(c);
             }
+            let done = params.selection == Selection::Vicinity
+                && params.early_accept > 0.0
+                && v.score >= 4.5 * v.pairs as f32 * params.early_accept;
+            cands[c] = cand;
+            if done {
+                examined = c + 1;
+                break;
+            }
         }
         cands[c] = cand;
     }
+    let nc = examined.min(nc);
     let cands = &cands[..nc];
     let b = best.ok_or(LocalizeError::NoMatch { candidates: nc })?;
     let c = cands[b];

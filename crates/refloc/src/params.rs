@@ -96,6 +96,8 @@ pub struct Params {
     pub min_valid_points: u32,
     /// Site selection rule.
     pub selection: Selection,
+    /// Early stop ratio for vicinity selection (0: examine every candidate).
+    pub early_accept: f32,
 }
 
 impl Params {
@@ -119,7 +121,7 @@ impl Params {
             hist_theta_bins: 18,
             hist_rho_max: 16.0,
             nc_min: 5,
-            nc_max: 30,
+            nc_max: 80,
             nc_margin: 0.25,
             desc_radius: 2.0,
             tentative_k: 4,
@@ -137,6 +139,7 @@ impl Params {
             accept_ratio: 0.5,
             min_valid_points: 20,
             selection: Selection::Vicinity,
+            early_accept: 0.7,
         }
     }
 
@@ -225,6 +228,9 @@ impl Params {
         if !(self.accept_ratio >= 0.0 && self.accept_ratio <= 1.0) {
             return Err("accept_ratio");
         }
+        if !(self.early_accept >= 0.0 && self.early_accept <= 1.0) {
+            return Err("early_accept");
+        }
         if self.min_valid_points < 3 {
             return Err("min_valid_points");
         }
@@ -275,6 +281,7 @@ impl Params {
                 1 => Selection::Vicinity,
                 _ => return Err("selection"),
             },
+            early_accept: r.early_accept.get(),
         })
     }
 
@@ -322,7 +329,8 @@ impl Params {
                 Selection::MatchScore => 0,
                 Selection::Vicinity => 1,
             }),
-            reserved: [U32::new(0); 14],
+            early_accept: F32::new(self.early_accept),
+            reserved: [U32::new(0); 13],
         }
     }
 }

@@ -79,7 +79,10 @@ fn transform(
     if n == 0 {
         return (Vec::new(), Vec::new());
     }
-    assert!(n < NONE as usize, "edt: {width} x {height} cells do not fit u32 indices");
+    assert!(
+        n < NONE as usize,
+        "edt: {width} x {height} cells do not fit u32 indices"
+    );
 
     // Pass 1, rows: the column of the nearest obstacle in the same row.
     let mut col_of = vec![NONE; n];
@@ -171,13 +174,16 @@ fn transform(
         }
     });
     let near = if want_nearest {
-        col_of.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
-            for (s, (_, snear)) in strips.iter().enumerate() {
-                let x0 = s * STRIP;
-                let sw = STRIP.min(width - x0);
-                row[x0..x0 + sw].copy_from_slice(&snear[y * sw..(y + 1) * sw]);
-            }
-        });
+        col_of
+            .par_chunks_mut(width)
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (s, (_, snear)) in strips.iter().enumerate() {
+                    let x0 = s * STRIP;
+                    let sw = STRIP.min(width - x0);
+                    row[x0..x0 + sw].copy_from_slice(&snear[y * sw..(y + 1) * sw]);
+                }
+            });
         col_of
     } else {
         Vec::new()
@@ -276,6 +282,18 @@ impl DistanceField {
             unknown_is_obstacle,
             sq,
             nearest,
+        }
+    }
+
+    /// A copy of the header fields with empty `sq` and `nearest`.
+    pub fn clone_header(&self) -> Self {
+        DistanceField {
+            width: self.width,
+            height: self.height,
+            resolution: self.resolution,
+            unknown_is_obstacle: self.unknown_is_obstacle,
+            sq: Vec::new(),
+            nearest: Vec::new(),
         }
     }
 

@@ -31,7 +31,10 @@ fn check(w: usize, h: usize, obst: &[bool]) {
         }
         let j = near[i] as usize;
         assert!(obst[j], "{w}x{h}: nearest of {i} is {j}, not an obstacle");
-        let (dx, dy) = ((i % w) as i64 - (j % w) as i64, (i / w) as i64 - (j / w) as i64);
+        let (dx, dy) = (
+            (i % w) as i64 - (j % w) as i64,
+            (i / w) as i64 - (j / w) as i64,
+        );
         assert_eq!((dx * dx + dy * dy) as f32, sq[i], "{w}x{h}: cell {i}");
     }
 }

@@ -75,6 +75,13 @@ pub struct GvdOptions {
     /// Connected skeleton pieces shorter than this in total are removed
     /// (metres; default 1.0).
     pub min_component_m: f64,
+    /// Isolated obstacle components (8-connected, not touching the image
+    /// border) smaller than this are ignored by the GVD (square metres;
+    /// default 0.05, e.g. 20 cells at 5 cm): laser noise specks, single
+    /// unknown cells and chair legs would otherwise each put a small loop
+    /// with two vertices into the GVD. They still count for clearance
+    /// ([`GvdNode::clearance`]) and lines of sight.
+    pub min_obstacle_area_m2: f64,
 }
 
 impl Default for GvdOptions {
@@ -83,10 +90,11 @@ impl Default for GvdOptions {
             robot_radius_m: 0.2,
             unknown_is_obstacle: true,
             min_separation_cells: 2.0,
-            separation_factor: 0.15,
+            separation_factor: 0.0,
             min_spur_m: 0.5,
             spur_clearance_factor: 1.5,
             min_component_m: 1.0,
+            min_obstacle_area_m2: 0.05,
         }
     }
 }
@@ -183,32 +191,136 @@ pub fn extract(grid: &OccupancyGrid, dist: &DistanceField, opts: &GvdOptions) ->
             ..Default::default()
         };
     }
+    // The field the GVD is extracted from: without the specks.
+    let res = grid.resolution;
+    let max_speck = (opts.min_obstacle_area_m2 / (res * res)).floor();
+    let cleaned;
+    let gdist = match specks(dist, max_speck.clamp(0.0, (w * h) as f64) as usize) {
+        Some(speck) => {
+            let (sq, nearest) =
+                crate::edt::nearest_obstacle(w, h, |i| dist.is_obstacle(i) && !speck[i]);
+            cleaned = DistanceField {
+                sq,
+                nearest,
+                ..dist.clone_header()
+            };
+            &cleaned
+        }
+        None => dist,
+    };
     let mut sk = Skeleton {
         w,
-        mask: candidates(dist, opts),
+        mask: candidates(gdist, opts),
         order: Vec::new(),
     };
-    fill_empty_holes(&mut sk.mask, dist, w, h);
+    fill_empty_holes(&mut sk.mask, gdist, w, h);
     sk.order = (0..w * h)
         .filter(|&i| sk.mask[i] != 0)
         .map(|i| i as u32)
         .collect();
     sk.thin();
 
-    let res = grid.resolution;
+    let r = (opts.robot_radius_m / res).max(0.0);
+    let fields = Fields {
+        gvd: gdist,
+        real: dist,
+        min_sq: r * r,
+    };
     for _ in 0..200 {
-        let raw = sk.extract(dist);
-        if !sk.prune_spurs(&raw, dist, res, opts) {
+        let raw = sk.extract(gdist);
+        if !sk.prune_spurs(&raw, &fields, opts) {
             break;
         }
         sk.thin();
     }
-    let raw = sk.extract(dist);
-    if sk.remove_small_components(&raw, res, opts.min_component_m) {
+    let raw = sk.extract(gdist);
+    if sk.remove_small_components(&raw, &fields, opts.min_component_m) {
         sk.thin();
     }
-    let raw = sk.extract(dist);
+    let raw = sk.extract(gdist);
     raw.into_graph(grid, dist, &sk)
+}
+
+/// The distance fields the pruning looks at.
+struct Fields<'a> {
+    /// The field the GVD is extracted from (specks removed).
+    gvd: &'a DistanceField,
+    /// The real field.
+    real: &'a DistanceField,
+    /// Squared robot radius (cells^2).
+    min_sq: f64,
+}
+
+impl Fields<'_> {
+    /// Cells of `path` closer to a real obstacle (a speck) than the robot
+    /// radius.
+    fn low_count(&self, path: &[u32]) -> usize {
+        path.iter()
+            .filter(|&&c| (self.real.sq[c as usize] as f64) < self.min_sq)
+            .count()
+    }
+
+    /// Whether most of `path` runs closer to specks than the robot radius:
+    /// a branch through clutter (ray streaks broken into specks, furniture
+    /// legs), not a passage.
+    fn cluttered(&self, path: &[u32]) -> bool {
+        2 * self.low_count(path) > path.len()
+    }
+}
+
+/// Flags the cells of obstacle components (8-connected) of at most
+/// `max_cells` cells that do not touch the image border; `None` when there
+/// is none.
+fn specks(dist: &DistanceField, max_cells: usize) -> Option<Vec<bool>> {
+    if max_cells == 0 {
+        return None;
+    }
+    let (w, h) = (dist.width as usize, dist.height as usize);
+    let mut seen = vec![false; w * h];
+    let mut speck: Option<Vec<bool>> = None;
+    let mut stack: Vec<u32> = Vec::new();
+    let mut comp: Vec<u32> = Vec::new();
+    for start in 0..w * h {
+        if seen[start] || !dist.is_obstacle(start) {
+            continue;
+        }
+        seen[start] = true;
+        stack.push(start as u32);
+        comp.clear();
+        let mut size = 0usize;
+        let mut border = false;
+        while let Some(i) = stack.pop() {
+            let i = i as usize;
+            size += 1;
+            if size <= max_cells {
+                comp.push(i as u32);
+            }
+            let (x, y) = (i % w, i / w);
+            if x == 0 || y == 0 || x + 1 == w || y + 1 == h {
+                border = true;
+                // Border cells have out-of-grid neighbours: visit the
+                // in-grid ones only.
+            }
+            for (dx, dy) in DIRS {
+                let (nx, ny) = (x as isize + dx, y as isize + dy);
+                if nx < 0 || ny < 0 || nx >= w as isize || ny >= h as isize {
+                    continue;
+                }
+                let j = ny as usize * w + nx as usize;
+                if !seen[j] && dist.is_obstacle(j) {
+                    seen[j] = true;
+                    stack.push(j as u32);
+                }
+            }
+        }
+        if !border && size <= max_cells {
+            let s = speck.get_or_insert_with(|| vec![false; w * h]);
+            for &i in &comp {
+                s[i as usize] = true;
+            }
+        }
+    }
+    speck
 }
 
 /// 8-neighbour offsets, counter-clockwise from east.
@@ -286,7 +398,7 @@ fn candidates(dist: &DistanceField, opts: &GvdOptions) -> Vec<u8> {
         if y == 0 || y + 1 == h {
             return;
         }
-        for x in 1..w - 1 {
+        for (x, slot) in row.iter_mut().enumerate().take(w - 1).skip(1) {
             let i = y * w + x;
             let s = dist.sq[i] as f64;
             let f = dist.nearest[i];
@@ -306,7 +418,7 @@ fn candidates(dist: &DistanceField, opts: &GvdOptions) -> Vec<u8> {
                 let (gx, gy) = ((g as usize % w) as i64, (g as usize / w) as i64);
                 let sep2 = ((fx - gx) * (fx - gx) + (fy - gy) * (fy - gy)) as f64;
                 if sep2 > thr2 {
-                    row[x] = 1;
+                    *slot = 1;
                     break;
                 }
             }
@@ -427,13 +539,31 @@ impl Skeleton {
                 break;
             }
         }
+        // One-cell tips: a cell whose only two neighbours touch each other
+        // is a one-cell spur (a bump on a line) or the thick tip of a line
+        // end; decided on one snapshot, so a line loses at most one cell.
+        let tips: Vec<u32> = self
+            .order
+            .par_iter()
+            .copied()
+            .filter(|&i| {
+                let c = self.config(i as usize);
+                c.count_ones() == 2 && SIMPLE[c as usize]
+            })
+            .collect();
+        for i in tips {
+            self.mask[i as usize] = 0;
+        }
         // Staircase corners: a simple cell with two perpendicular
         // 4-neighbours (which touch each other diagonally) is redundant.
         for idx in 0..self.order.len() {
             let i = self.order[idx] as usize;
+            if self.mask[i] == 0 {
+                continue;
+            }
             let c = self.config(i);
             let (e, n, w, s) = (c & 1 != 0, c & 4 != 0, c & 16 != 0, c & 64 != 0);
-            if SIMPLE[c as usize] && ((n && e) || (e && s) || (s && w) || (w && n)) {
+            if SIMPLE[c as usize] && (n || s) && (e || w) {
                 self.mask[i] = 0;
             }
         }
@@ -462,7 +592,8 @@ impl Skeleton {
                 continue;
             }
             let d = degree(c);
-            if d == 1 || d == 0 {
+            // End points: one neighbour, or two that touch each other.
+            if d <= 1 || (d == 2 && SIMPLE[self.config(c as usize) as usize]) {
                 node_of.insert(c, nodes.len());
                 nodes.push(RawNode {
                     rep: c,
@@ -477,9 +608,7 @@ impl Skeleton {
                     let m = members[k] as usize;
                     for dir in 0..8 {
                         let n = self.neighbour(m, dir) as u32;
-                        if self.mask[n as usize] != 0
-                            && degree(n) >= 3
-                            && !node_of.contains_key(&n)
+                        if self.mask[n as usize] != 0 && degree(n) >= 3 && !node_of.contains_key(&n)
                         {
                             node_of.insert(n, id);
                             members.push(n);
@@ -600,22 +729,18 @@ impl Skeleton {
 
     /// Step 4, one round: removes the qualifying end branches; true when
     /// something was removed.
-    fn prune_spurs(
-        &mut self,
-        g: &RawGraph,
-        dist: &DistanceField,
-        res: f64,
-        opts: &GvdOptions,
-    ) -> bool {
+    fn prune_spurs(&mut self, g: &RawGraph, fields: &Fields<'_>, opts: &GvdOptions) -> bool {
         let deg = g.degrees();
+        let res = fields.gvd.resolution;
         let mut by_vertex: HashMap<usize, Vec<(usize, f64, bool)>> = HashMap::new();
         for (e, edge) in g.edges.iter().enumerate() {
             for (v, other) in [(edge.a, edge.b), (edge.b, edge.a)] {
                 if deg[v] >= 3 {
                     let len = path_length(&edge.path, self.w) * res;
                     let is_spur = deg[other] == 1 && other != v && {
-                        let clear = (dist.sq[g.nodes[v].rep as usize] as f64).sqrt() * res;
+                        let clear = (fields.gvd.sq[g.nodes[v].rep as usize] as f64).sqrt() * res;
                         len < opts.min_spur_m.max(opts.spur_clearance_factor * clear)
+                            || fields.cluttered(&edge.path)
                     };
                     by_vertex.entry(v).or_default().push((e, len, is_spur));
                 }
@@ -664,7 +789,13 @@ impl Skeleton {
 
     /// Step 5: removes connected pieces shorter than `min_len_m`; true when
     /// something was removed.
-    fn remove_small_components(&mut self, g: &RawGraph, res: f64, min_len_m: f64) -> bool {
+    fn remove_small_components(
+        &mut self,
+        g: &RawGraph,
+        fields: &Fields<'_>,
+        min_len_m: f64,
+    ) -> bool {
+        let res = fields.gvd.resolution;
         let n = g.nodes.len();
         let mut parent: Vec<usize> = (0..n).collect();
         fn find(p: &mut [usize], mut x: usize) -> usize {
@@ -681,15 +812,19 @@ impl Skeleton {
             }
         }
         let mut len = vec![0.0f64; n];
+        let mut cells = vec![0usize; n];
+        let mut low = vec![0usize; n];
         for e in &g.edges {
             let r = find(&mut parent, e.a);
             len[r] += path_length(&e.path, self.w) * res;
+            cells[r] += e.path.len();
+            low[r] += fields.low_count(&e.path);
         }
         let mut removed = false;
         let small: Vec<bool> = (0..n)
             .map(|v| {
                 let r = find(&mut parent, v);
-                len[r] < min_len_m
+                len[r] < min_len_m || 2 * low[r] > cells[r]
             })
             .collect();
         for (v, node) in g.nodes.iter().enumerate() {

@@ -4,7 +4,12 @@ use crate::mapfile::Cell;
 /// A `w x h` map (0.05 m cells), all occupied, with the given free
 /// rectangles `(x0, y0, x1, y1)` (inclusive-exclusive, cells) and then the
 /// given occupied rectangles.
-fn map(w: u32, h: u32, free: &[(u32, u32, u32, u32)], occ: &[(u32, u32, u32, u32)]) -> OccupancyGrid {
+fn map(
+    w: u32,
+    h: u32,
+    free: &[(u32, u32, u32, u32)],
+    occ: &[(u32, u32, u32, u32)],
+) -> OccupancyGrid {
     let mut cells = vec![Cell::Occupied; (w * h) as usize];
     for (list, c) in [(free, Cell::Free), (occ, Cell::Occupied)] {
         for &(x0, y0, x1, y1) in list {
@@ -35,7 +40,10 @@ fn cycles(g: &GvdGraph) -> usize {
     }
     let mut comps = n;
     for e in &g.edges {
-        let (a, b) = (find(&mut parent, e.a as usize), find(&mut parent, e.b as usize));
+        let (a, b) = (
+            find(&mut parent, e.a as usize),
+            find(&mut parent, e.b as usize),
+        );
         if a != b {
             parent[a] = b;
             comps -= 1;
@@ -60,7 +68,10 @@ fn check_consistent(g: &GvdGraph) {
         assert_ne!(n.degree, 0);
         if n.degree == 2 {
             // Only the synthetic node of a cycle has degree 2.
-            assert!(g.edges.iter().any(|e| e.a == e.b && (e.a as usize) < g.nodes.len()));
+            assert!(g
+                .edges
+                .iter()
+                .any(|e| e.a == e.b && (e.a as usize) < g.nodes.len()));
         }
     }
 }
@@ -85,18 +96,17 @@ fn straight_corridor_gives_one_line() {
 
 #[test]
 fn t_junction_has_one_vertex_of_degree_three() {
-    let g = map(
-        340,
-        200,
-        &[(10, 10, 330, 40), (155, 40, 185, 190)],
-        &[],
-    );
+    let g = map(340, 200, &[(10, 10, 330, 40), (155, 40, 185, 190)], &[]);
     let r = gvd(&g, &GvdOptions::default());
     check_consistent(&r);
     let v: Vec<&GvdNode> = r.nodes.iter().filter(|n| n.degree >= 3).collect();
     assert_eq!(v.len(), 1, "{:?}", r.nodes);
     assert_eq!(v[0].degree, 3);
-    assert!((v[0].cx as i64 - 170).abs() <= 3 && (v[0].cy as i64 - 25).abs() <= 16, "{:?}", v[0]);
+    assert!(
+        (v[0].cx as i64 - 170).abs() <= 3 && (v[0].cy as i64 - 25).abs() <= 16,
+        "{:?}",
+        v[0]
+    );
     assert_eq!(r.end_point_count(), 3);
     assert_eq!(cycles(&r), 0);
 }
@@ -141,7 +151,11 @@ fn pruning_removes_a_noise_bump_spur() {
     };
     let raw = gvd(&g, &none);
     check_consistent(&raw);
-    assert!(raw.vertex_count() >= 1, "the bump makes a spur: {:?}", raw.nodes);
+    assert!(
+        raw.vertex_count() >= 1,
+        "the bump makes a spur: {:?}",
+        raw.nodes
+    );
     let pruned = gvd(&g, &GvdOptions::default());
     check_consistent(&pruned);
     assert_eq!(pruned.vertex_count(), 0, "{:?}", pruned.nodes);
@@ -156,7 +170,11 @@ fn narrow_door_breaks_the_gvd_at_robot_radius() {
         let g = map(
             330,
             140,
-            &[(10, 10, 150, 130), (180, 10, 320, 130), (150, 70 - door / 2, 180, 70 + door / 2)],
+            &[
+                (10, 10, 150, 130),
+                (180, 10, 320, 130),
+                (150, 70 - door / 2, 180, 70 + door / 2),
+            ],
             &[],
         );
         let r = gvd(&g, &GvdOptions::default());
@@ -172,7 +190,10 @@ fn narrow_door_breaks_the_gvd_at_robot_radius() {
         }
         let mut comps = n;
         for e in &r.edges {
-            let (a, b) = (find(&mut parent, e.a as usize), find(&mut parent, e.b as usize));
+            let (a, b) = (
+                find(&mut parent, e.a as usize),
+                find(&mut parent, e.b as usize),
+            );
             if a != b {
                 parent[a] = b;
                 comps -= 1;
@@ -204,7 +225,8 @@ fn unknown_as_free_option() {
             ..GvdOptions::default()
         },
     );
-    let mean_y = |r: &GvdGraph| r.cells.iter().map(|c| c.1 as f64).sum::<f64>() / r.cells.len() as f64;
+    let mean_y =
+        |r: &GvdGraph| r.cells.iter().map(|c| c.1 as f64).sum::<f64>() / r.cells.len() as f64;
     // With unknown as obstacle the line is in the middle of the free part
     // (y 30..70 -> 49.5); with unknown as free it moves down (y 1..70).
     assert!((mean_y(&a) - 49.5).abs() < 3.0, "{}", mean_y(&a));

@@ -192,7 +192,10 @@ impl OccupancyGrid {
     pub fn cell_to_map(&self, uv: [f64; 2]) -> [f64; 2] {
         let (s, c) = self.origin[2].sin_cos();
         let (u, v) = (uv[0] * self.resolution, uv[1] * self.resolution);
-        [self.origin[0] + c * u - s * v, self.origin[1] + s * u + c * v]
+        [
+            self.origin[0] + c * u - s * v,
+            self.origin[1] + s * u + c * v,
+        ]
     }
 }
 
@@ -485,7 +488,7 @@ pub fn load_image(
             let differs = o
                 .iter()
                 .zip(src.grid.origin.iter())
-                .any(|(a, b)| !((a - b).abs() <= 1e-9));
+                .any(|(a, b)| !a.is_finite() || (a - b).abs() > 1e-9);
             if differs {
                 return Err(MapError::Conflict {
                     path: yaml,
@@ -683,13 +686,15 @@ fn parse_description(path: &Path, text: &str) -> Result<Description, MapError> {
         return Err(MapError::YamlSyntax {
             path: p(),
             line: None,
-            message: format!("expected a mapping of keys to values, found {}", render(doc)),
+            message: format!(
+                "expected a mapping of keys to values, found {}",
+                render(doc)
+            ),
         });
     }
     let get = |field: &'static str| doc.as_mapping_get(field).map(untag);
-    let required = |field: &'static str| {
-        get(field).ok_or(MapError::MissingField { path: p(), field })
-    };
+    let required =
+        |field: &'static str| get(field).ok_or(MapError::MissingField { path: p(), field });
     let number = |field: &'static str, expected: &'static str| -> Result<f64, MapError> {
         let v = required(field)?;
         match as_number(v) {

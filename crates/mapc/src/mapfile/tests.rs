@@ -71,7 +71,8 @@ fn accepts_ints_comments_bools_and_tags() {
 
 #[test]
 fn negate_missing_defaults_to_false_and_mode_optional() {
-    let (_d, y) = setup("resolution: 0.1\norigin: [1, 2, 0.5]\noccupied_thresh: 0.65\nfree_thresh: 0.196\n");
+    let (_d, y) =
+        setup("resolution: 0.1\norigin: [1, 2, 0.5]\noccupied_thresh: 0.65\nfree_thresh: 0.196\n");
     let m = load_yaml(&y).unwrap();
     assert!(!m.negate);
     assert_eq!(m.grid.origin, [1.0, 2.0, 0.5]);
@@ -166,7 +167,12 @@ fn raw_mode() {
     let dir = tempfile::tempdir().unwrap();
     // 0 free, 100 occupied, 255 unknown, 10 (p=0.1 < 0.196) free,
     // 50 unknown, 70 occupied, 101 unknown.
-    write_pgm(&dir.path().join("r.pgm"), 7, 1, &[0, 100, 255, 10, 50, 70, 101]);
+    write_pgm(
+        &dir.path().join("r.pgm"),
+        7,
+        1,
+        &[0, 100, 255, 10, 50, 70, 101],
+    );
     // negate is ignored in raw mode (Nav2).
     write_yaml(
         &dir.path().join("r.yaml"),
@@ -222,7 +228,10 @@ fn sixteen_bit_pgm() {
     let g = load_yaml(&dir.path().join("w.yaml")).unwrap().grid;
     use Cell::*;
     // 52685 -> 205 (8 bits): unknown.
-    assert_eq!([g.get(0, 0), g.get(1, 0), g.get(2, 0)], [Free, Occupied, Unknown]);
+    assert_eq!(
+        [g.get(0, 0), g.get(1, 0), g.get(2, 0)],
+        [Free, Occupied, Unknown]
+    );
 }
 
 #[test]
@@ -250,7 +259,10 @@ fn missing_image_file() {
     let e = load_yaml(&y).unwrap_err();
     assert!(matches!(e, MapError::ImageMissing { .. }), "{e}");
     let msg = e.to_string();
-    assert!(msg.contains("nothere.pgm") && msg.contains("x.yaml"), "{msg}");
+    assert!(
+        msg.contains("nothere.pgm") && msg.contains("x.yaml"),
+        "{msg}"
+    );
 }
 
 #[test]
@@ -269,46 +281,127 @@ fn malformed_yaml_reports_line() {
     }
     assert!(e.to_string().contains("m.yaml"), "{e}");
     let e = err_of("resolution: 0.05\nresolution: 0.1\n");
-    assert!(matches!(e, MapError::YamlSyntax { .. }), "duplicate key: {e}");
+    assert!(
+        matches!(e, MapError::YamlSyntax { .. }),
+        "duplicate key: {e}"
+    );
     let e = err_of("");
     // Only "image: m.pgm": the other required fields are missing.
-    assert!(matches!(e, MapError::MissingField { field: "resolution", .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            MapError::MissingField {
+                field: "resolution",
+                ..
+            }
+        ),
+        "{e}"
+    );
     let dir = tempfile::tempdir().unwrap();
     let y = dir.path().join("list.yaml");
     write_yaml(&y, "- 1\n- 2\n");
-    assert!(matches!(load_yaml(&y).unwrap_err(), MapError::YamlSyntax { .. }));
+    assert!(matches!(
+        load_yaml(&y).unwrap_err(),
+        MapError::YamlSyntax { .. }
+    ));
     write_yaml(&y, "");
-    assert!(matches!(load_yaml(&y).unwrap_err(), MapError::YamlSyntax { .. }));
+    assert!(matches!(
+        load_yaml(&y).unwrap_err(),
+        MapError::YamlSyntax { .. }
+    ));
     fs::write(&y, b"image: \xff\xfe\n").unwrap();
-    assert!(matches!(load_yaml(&y).unwrap_err(), MapError::YamlSyntax { .. }));
+    assert!(matches!(
+        load_yaml(&y).unwrap_err(),
+        MapError::YamlSyntax { .. }
+    ));
     write_yaml(&y, &"[".repeat(100_000));
-    assert!(matches!(load_yaml(&y).unwrap_err(), MapError::YamlSyntax { .. }));
+    assert!(matches!(
+        load_yaml(&y).unwrap_err(),
+        MapError::YamlSyntax { .. }
+    ));
 }
 
 #[test]
 fn missing_and_ill_typed_fields() {
     let e = err_of(&STD.replace("origin: [0.0, 0.0, 0.0]\n", ""));
-    assert!(matches!(e, MapError::MissingField { field: "origin", .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            MapError::MissingField {
+                field: "origin",
+                ..
+            }
+        ),
+        "{e}"
+    );
     assert!(e.to_string().contains("origin"));
     let e = err_of(&STD.replace("free_thresh: 0.196\n", ""));
-    assert!(matches!(e, MapError::MissingField { field: "free_thresh", .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            MapError::MissingField {
+                field: "free_thresh",
+                ..
+            }
+        ),
+        "{e}"
+    );
     let e = err_of(&STD.replace("[0.0, 0.0, 0.0]", "[0.0, 0.0]"));
-    assert!(matches!(e, MapError::BadField { field: "origin", .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            MapError::BadField {
+                field: "origin",
+                ..
+            }
+        ),
+        "{e}"
+    );
     assert!(e.to_string().contains("2 items"), "{e}");
     let e = err_of(&STD.replace("[0.0, 0.0, 0.0]", "[0.0, abc, 0.0]"));
-    assert!(matches!(e, MapError::BadField { field: "origin", .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            MapError::BadField {
+                field: "origin",
+                ..
+            }
+        ),
+        "{e}"
+    );
     assert!(e.to_string().contains("abc"), "{e}");
     let e = err_of(&STD.replace("negate: 0", "negate: maybe"));
-    assert!(matches!(e, MapError::BadField { field: "negate", .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            MapError::BadField {
+                field: "negate",
+                ..
+            }
+        ),
+        "{e}"
+    );
     let e = err_of(&format!("{STD}mode: fancy\n"));
     assert!(matches!(e, MapError::BadField { field: "mode", .. }), "{e}");
     assert!(e.to_string().contains("fancy"));
     let e = err_of(&STD.replace("occupied_thresh: 0.65", "occupied_thresh: [1]"));
-    assert!(matches!(e, MapError::BadField { field: "occupied_thresh", .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            MapError::BadField {
+                field: "occupied_thresh",
+                ..
+            }
+        ),
+        "{e}"
+    );
     let (_d, y) = setup("");
     write_yaml(&y, &format!("image: [a]\n{STD}"));
     let e = load_yaml(&y).unwrap_err();
-    assert!(matches!(e, MapError::BadField { field: "image", .. }), "{e}");
+    assert!(
+        matches!(e, MapError::BadField { field: "image", .. }),
+        "{e}"
+    );
 }
 
 #[test]
@@ -318,7 +411,16 @@ fn bad_resolution() {
         assert!(matches!(e, MapError::BadResolution { .. }), "{r}: {e}");
     }
     let e = err_of(&STD.replace("0.05", "fine"));
-    assert!(matches!(e, MapError::BadField { field: "resolution", .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            MapError::BadField {
+                field: "resolution",
+                ..
+            }
+        ),
+        "{e}"
+    );
     let dir = tempfile::tempdir().unwrap();
     let img = dir.path().join("q.pgm");
     write_pgm(&img, 3, 2, &PX);
@@ -328,7 +430,12 @@ fn bad_resolution() {
 
 #[test]
 fn bad_thresholds() {
-    for (o, f) in [("0.65", "0.7"), ("1.5", "0.2"), ("0.65", "-0.1"), ("0.5", "0.5")] {
+    for (o, f) in [
+        ("0.65", "0.7"),
+        ("1.5", "0.2"),
+        ("0.65", "-0.1"),
+        ("0.5", "0.5"),
+    ] {
         let e = err_of(
             &STD.replace("occupied_thresh: 0.65", &format!("occupied_thresh: {o}"))
                 .replace("free_thresh: 0.196", &format!("free_thresh: {f}")),
@@ -372,9 +479,16 @@ fn huge_header_with_tiny_file() {
     let y = dir.path().join("h.yaml");
     write_yaml(&y, &format!("image: h.pgm\n{STD}"));
     // Beyond the cell limit: refused from the header.
-    fs::write(dir.path().join("h.pgm"), b"P5\n100000 100000\n255\n\x00\x00").unwrap();
+    fs::write(
+        dir.path().join("h.pgm"),
+        b"P5\n100000 100000\n255\n\x00\x00",
+    )
+    .unwrap();
     let e = load_yaml(&y).unwrap_err();
-    assert!(matches!(e, MapError::ImageTooLarge { width: 100000, .. }), "{e}");
+    assert!(
+        matches!(e, MapError::ImageTooLarge { width: 100000, .. }),
+        "{e}"
+    );
     fs::write(dir.path().join("h.pgm"), b"P5\n300000 2\n255\n\x00\x00").unwrap();
     let e = load_yaml(&y).unwrap_err();
     assert!(matches!(e, MapError::ImageTooLarge { .. }), "{e}");
@@ -433,16 +547,31 @@ fn load_image_forms() {
     let m = load_image(&img, Some(0.1), Some([1.0, 2.0, 0.0])).unwrap();
     assert_eq!(m.grid.origin, [1.0, 2.0, 0.0]);
     // A YAML beside it is used.
-    write_yaml(&dir.path().join("lab.yaml"), &format!("image: lab.pgm\n{STD}"));
+    write_yaml(
+        &dir.path().join("lab.yaml"),
+        &format!("image: lab.pgm\n{STD}"),
+    );
     let m = load_image(&img, None, None).unwrap();
     assert_eq!(m.grid.resolution, 0.05);
     assert!(m.yaml_path.is_some());
     assert!(load_image(&img, Some(0.05), Some([0.0; 3])).is_ok());
     let e = load_image(&img, Some(0.1), None).unwrap_err();
-    assert!(matches!(e, MapError::Conflict { field: "resolution", .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            MapError::Conflict {
+                field: "resolution",
+                ..
+            }
+        ),
+        "{e}"
+    );
     // ... and must describe this image.
     write_pgm(&dir.path().join("other.pgm"), 3, 2, &PX);
-    write_yaml(&dir.path().join("lab.yaml"), &format!("image: other.pgm\n{STD}"));
+    write_yaml(
+        &dir.path().join("lab.yaml"),
+        &format!("image: other.pgm\n{STD}"),
+    );
     let e = load_image(&img, None, None).unwrap_err();
     assert!(matches!(e, MapError::ImageMismatch { .. }), "{e}");
     // Missing image without YAML.
@@ -455,12 +584,7 @@ fn blocked_bits_layout() {
     let g = OccupancyGrid::from_ascii(
         &[
             "#..?.", //
-            ".....",
-            "?#...",
-            "....#",
-            ".....",
-            ".....",
-            "....#",
+            ".....", "?#...", "....#", ".....", ".....", "....#",
         ],
         0.1,
         [0.0; 3],
@@ -489,13 +613,7 @@ fn blocked_bits_layout() {
 
 #[test]
 fn cell_center_and_frame_agree() {
-    let g = OccupancyGrid::from_cells(
-        4,
-        3,
-        0.05,
-        [1.0, -2.0, 0.5],
-        vec![Cell::Free; 12],
-    );
+    let g = OccupancyGrid::from_cells(4, 3, 0.05, [1.0, -2.0, 0.5], vec![Cell::Free; 12]);
     let f = g.frame();
     for (cx, cy) in [(0, 0), (3, 2), (1, 2)] {
         let c = g.cell_center(cx, cy);
@@ -505,7 +623,8 @@ fn cell_center_and_frame_agree() {
         assert!((uv[0] - (cx as f32 + 0.5)).abs() < 1e-3);
         assert!((uv[1] - (cy as f32 + 0.5)).abs() < 1e-3);
     }
-    let c = OccupancyGrid::from_cells(1, 1, 2.0, [0.0, 0.0, 0.0], vec![Cell::Free]).cell_center(0, 0);
+    let c =
+        OccupancyGrid::from_cells(1, 1, 2.0, [0.0, 0.0, 0.0], vec![Cell::Free]).cell_center(0, 0);
     assert_eq!(c, [1.0, 1.0]);
 }
 
@@ -550,28 +669,5 @@ fn every_shared_map_loads() {
         );
         assert!(g.free_count() > 1000);
         assert!(occ > 100);
-    }
-}
-
-#[test]
-#[ignore]
-fn tmp_dump_maps() {
-    let Some(yamls) = shared_maps() else { return };
-    fs::create_dir_all("/tmp/mc").unwrap();
-    for y in &yamls {
-        let g = load_yaml(y).unwrap().grid;
-        let mut img = image::RgbImage::new(g.width, g.height);
-        for cy in 0..g.height {
-            for cx in 0..g.width {
-                let c = match g.get(cx, cy) {
-                    Cell::Free => [255, 255, 255],
-                    Cell::Occupied => [0, 0, 0],
-                    Cell::Unknown => [160, 160, 200],
-                };
-                img.put_pixel(cx, g.height - 1 - cy, image::Rgb(c));
-            }
-        }
-        let name = y.file_stem().unwrap().to_string_lossy().into_owned();
-        img.save(format!("/tmp/mc/{name}.png")).unwrap();
     }
 }

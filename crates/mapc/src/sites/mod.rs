@@ -137,28 +137,29 @@ pub fn place_sites(
     let ok = |i: usize| !dist.is_obstacle(i) && dist.sq[i] as f64 >= min_sq;
     let mut sites: Vec<SitePlacement> = Vec::new();
     let mut at: HashMap<usize, u32> = HashMap::new();
-    let mut add = |sites: &mut Vec<SitePlacement>, cx: u32, cy: u32, kind: SiteKind| -> Option<u32> {
-        let i = cy as usize * w + cx as usize;
-        if cx >= grid.width || cy >= grid.height || !ok(i) {
-            return None;
-        }
-        if let Some(&s) = at.get(&i) {
-            return Some(s);
-        }
-        let [x, y] = grid.cell_center(cx, cy);
-        let id = sites.len() as u32;
-        sites.push(SitePlacement {
-            x,
-            y,
-            cx,
-            cy,
-            clearance_m: dist.clearance_m(i),
-            kind,
-            neighbours: Vec::new(),
-        });
-        at.insert(i, id);
-        Some(id)
-    };
+    let mut add =
+        |sites: &mut Vec<SitePlacement>, cx: u32, cy: u32, kind: SiteKind| -> Option<u32> {
+            let i = cy as usize * w + cx as usize;
+            if cx >= grid.width || cy >= grid.height || !ok(i) {
+                return None;
+            }
+            if let Some(&s) = at.get(&i) {
+                return Some(s);
+            }
+            let [x, y] = grid.cell_center(cx, cy);
+            let id = sites.len() as u32;
+            sites.push(SitePlacement {
+                x,
+                y,
+                cx,
+                cy,
+                clearance_m: dist.clearance_m(i),
+                kind,
+                neighbours: Vec::new(),
+            });
+            at.insert(i, id);
+            Some(id)
+        };
 
     let node_site: Vec<Option<u32>> = gvd
         .nodes
@@ -211,8 +212,23 @@ pub fn place_sites(
                 } else {
                     k1
                 };
-                let (cx, cy) = e.cells[pick];
-                chain.extend(add(&mut sites, cx, cy, SiteKind::Edge));
+                // The GVD may pass next to a speck it ignores: take the
+                // nearest cell along the edge (within a quarter of the
+                // spacing) that keeps the robot radius.
+                let reach = spacing / 4.0;
+                let found = (0..e.cells.len())
+                    .flat_map(|d| [pick.checked_sub(d), Some(pick + d)])
+                    .flatten()
+                    .filter(|&k| k < e.cells.len())
+                    .take_while(|&k| (arc[k] - arc[pick]).abs() <= reach)
+                    .find(|&k| {
+                        let (cx, cy) = e.cells[k];
+                        ok(cy as usize * w + cx as usize)
+                    });
+                if let Some(k) = found {
+                    let (cx, cy) = e.cells[k];
+                    chain.extend(add(&mut sites, cx, cy, SiteKind::Edge));
+                }
             }
         }
         chain.extend(node_site.get(e.b as usize).copied().flatten());
@@ -257,7 +273,15 @@ fn fill(
     let seen = Bits::new(state.n);
     let covered = AtomicU64::new(0);
     sites.par_iter().for_each(|s| {
-        let c = sweep(&blocked, s.cx, s.cy, range, &seen, &state.considered_bits, false);
+        let c = sweep(
+            &blocked,
+            s.cx,
+            s.cy,
+            range,
+            &seen,
+            &state.considered_bits,
+            false,
+        );
         covered.fetch_add(c, Ordering::Relaxed);
     });
     let mut covered = covered.into_inner();
@@ -271,9 +295,7 @@ fn fill(
     };
     let w = grid.width as usize;
     let mut cand: Vec<u32> = (0..state.n)
-        .filter(|&i| {
-            state.considered_bits.get(i) && !seen.get(i) && dist.sq[i] as f64 >= min_sq
-        })
+        .filter(|&i| state.considered_bits.get(i) && !seen.get(i) && dist.sq[i] as f64 >= min_sq)
         .map(|i| i as u32)
         .collect();
     cand.sort_unstable_by_key(|&i| (std::cmp::Reverse(dist.sq[i as usize].to_bits()), i));
@@ -319,7 +341,17 @@ pub fn coverage(
     let range = range_m / grid.resolution;
     let covered: u64 = sites
         .par_iter()
-        .map(|s| sweep(blocked, s.cx, s.cy, range, &seen, &state.considered_bits, false))
+        .map(|s| {
+            sweep(
+                blocked,
+                s.cx,
+                s.cy,
+                range,
+                &seen,
+                &state.considered_bits,
+                false,
+            )
+        })
         .sum();
     let w = grid.width as usize;
     let uncovered = (0..state.n)
@@ -428,7 +460,7 @@ impl Bits {
     }
     #[inline]
     fn get(&self, i: usize) -> bool {
-        self.0[i / 32].load(Ordering::Relaxed) >> (i % 32) & 1 == 1
+        (self.0[i / 32].load(Ordering::Relaxed) >> (i % 32)) & 1 == 1
     }
     /// Sets bit `i`; true when it was clear.
     #[inline]
@@ -449,7 +481,7 @@ fn sweep(
     considered: &Bits,
     parallel: bool,
 ) -> u64 {
-    if !(range > 0.0) || cx >= blocked.width() || cy >= blocked.height() {
+    if range.is_nan() || range <= 0.0 || cx >= blocked.width() || cy >= blocked.height() {
         return 0;
     }
     let (w, _) = (blocked.width() as usize, ());

@@ -128,7 +128,14 @@ fn deterministic_per_seed() {
 
 #[test]
 fn invariants_hold_across_kinds_sizes_and_seeds() {
-    let sizes = [(64, 64), (65, 300), (600, 400), (400, 600), (257, 129), (1000, 1000)];
+    let sizes = [
+        (64, 64),
+        (65, 300),
+        (600, 400),
+        (400, 600),
+        (257, 129),
+        (1000, 1000),
+    ];
     for k in SynthKind::ALL {
         for (i, &(w, h)) in sizes.iter().enumerate() {
             for seed in 0..3u64 {
@@ -142,7 +149,18 @@ fn invariants_hold_across_kinds_sizes_and_seeds() {
 #[test]
 fn odd_resolutions_do_not_panic() {
     for k in SynthKind::ALL {
-        for &res in &[0.005, 0.02, 0.1, 0.25, 0.5, 1.0, 3.0, -1.0, 0.0, f64::INFINITY] {
+        for &res in &[
+            0.005,
+            0.02,
+            0.1,
+            0.25,
+            0.5,
+            1.0,
+            3.0,
+            -1.0,
+            0.0,
+            f64::INFINITY,
+        ] {
             for &(w, h) in &[(64, 64), (200, 90), (90, 200)] {
                 let o = SynthOptions {
                     kind: k,
@@ -154,6 +172,22 @@ fn odd_resolutions_do_not_panic() {
                 check_invariants(&generate(&o), &o);
             }
         }
+    }
+}
+
+#[test]
+fn random_sizes_and_resolutions_keep_invariants() {
+    let mut r = crate::rng::Rng::new(99);
+    for case in 0..90u64 {
+        let k = SynthKind::ALL[(case % 3) as usize];
+        let o = SynthOptions {
+            kind: k,
+            width: 64 + r.below(500) as u32,
+            height: 64 + r.below(500) as u32,
+            resolution: (r.range(-4.6, 0.7)).exp(), // 0.01 .. 2 m/cell
+            seed: r.next_u64(),
+        };
+        check_invariants(&generate(&o), &o);
     }
 }
 
@@ -175,16 +209,19 @@ fn small_maps_are_walled_boxes() {
 #[test]
 fn free_fraction_in_range_per_kind() {
     let ranges = [
-        (SynthKind::Office, 0.55, 0.85),
-        (SynthKind::Warehouse, 0.55, 0.90),
-        (SynthKind::Cave, 0.30, 0.60),
+        (SynthKind::Office, 0.6, 0.9),
+        (SynthKind::Warehouse, 0.6, 0.9),
+        (SynthKind::Cave, 0.22, 0.62),
     ];
     for (k, lo, hi) in ranges {
         for seed in 0..4 {
             for &(w, h) in &[(600, 400), (1000, 1000)] {
                 let m = generate(&opts(k, w, h, seed));
                 let f = free_fraction(&m);
-                assert!(f >= lo && f <= hi, "{k} {w}x{h} seed {seed}: free fraction {f:.3}");
+                assert!(
+                    f >= lo && f <= hi,
+                    "{k} {w}x{h} seed {seed}: free fraction {f:.3}"
+                );
             }
         }
     }
@@ -220,9 +257,17 @@ fn layout_loses_little_to_cut_off_pockets() {
 fn office_room_counts_scale() {
     for seed in 0..6 {
         let (_, demo) = generate_with_stats(&opts(SynthKind::Office, 600, 400, seed));
-        assert!((8..=16).contains(&demo.rooms), "600x400 seed {seed}: {} rooms", demo.rooms);
+        assert!(
+            (8..=16).contains(&demo.rooms),
+            "600x400 seed {seed}: {} rooms",
+            demo.rooms
+        );
         let (_, big) = generate_with_stats(&opts(SynthKind::Office, 1000, 1000, seed));
-        assert!((25..=55).contains(&big.rooms), "1000x1000 seed {seed}: {} rooms", big.rooms);
+        assert!(
+            (25..=55).contains(&big.rooms),
+            "1000x1000 seed {seed}: {} rooms",
+            big.rooms
+        );
     }
 }
 
@@ -249,7 +294,11 @@ fn rooms_differ_between_places() {
                 }
             }
         }
-        assert!(tiles.len() * 20 >= n * 19, "seed {seed}: {} unique of {n}", tiles.len());
+        assert!(
+            tiles.len() * 20 >= n * 19,
+            "seed {seed}: {} unique of {n}",
+            tiles.len()
+        );
     }
 }
 

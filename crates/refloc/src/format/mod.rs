@@ -269,8 +269,11 @@ pub struct ParamsRecord {
     pub min_valid_points: U32,
     /// Site selection: 0 largest matching score E (paper), 1 largest vicinity score.
     pub selection: U32,
+    /// With vicinity selection, stop examining candidates once one reaches
+    /// `M >= 4.5 * N_P * early_accept` (0 examines them all).
+    pub early_accept: F32,
     /// Zero.
-    pub reserved: [U32; 14],
+    pub reserved: [U32; 13],
 }
 
 /// The number of padding bytes that bring `len` to a multiple of [`SECTION_ALIGN`].

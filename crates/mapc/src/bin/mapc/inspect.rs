@@ -56,7 +56,7 @@ pub fn params_json(p: &refloc::Params) -> Value {
         "ransac_iters": p.ransac_iters, "ransac_threshold_m": p.ransac_threshold, "ransac_seed": p.ransac_seed,
         "min_inliers": p.min_inliers, "refine_iters": p.refine_iters, "refine_max_dist_m": p.refine_max_dist,
         "sigma_d_m": p.sigma_d, "accept_ratio": p.accept_ratio, "min_valid_points": p.min_valid_points,
-        "selection": format!("{:?}", p.selection),
+        "selection": format!("{:?}", p.selection), "early_accept": p.early_accept,
         "scratch_bytes_362": refloc::scratch_size(p, 362), "scratch_bytes_1081": refloc::scratch_size(p, 1081),
     })
 }
@@ -146,28 +146,33 @@ pub fn diff(a: DiffArgs) -> CliResult {
             changes.push(json!({"what": format!("input.{k}"), "old": va, "new": vb}));
         }
     }
-    // Sites: match each new site to the nearest old one.
+    // Sites: one-to-one greedy matching by distance (closest pairs first).
     let sa: Vec<[f32; 2]> = (0..da.site_count()).map(|i| da.site_xy(i)).collect();
     let sb: Vec<[f32; 2]> = (0..db.site_count()).map(|i| db.site_xy(i)).collect();
-    let nearest = |p: [f32; 2], set: &[[f32; 2]]| {
-        set.iter()
-            .enumerate()
-            .map(|(i, q)| (i, ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()))
-            .min_by(|x, y| x.1.total_cmp(&y.1))
-    };
-    let (mut added, mut moved, mut removed) = (Vec::new(), Vec::new(), Vec::new());
-    for (i, &p) in sb.iter().enumerate() {
-        match nearest(p, &sa) {
-            Some((_, d)) if d <= a.same => {}
-            Some((j, d)) if d <= a.moved => moved.push(json!({"old": j, "new": i, "from": sa[j], "to": p, "distance_m": d})),
-            _ => added.push(json!({"site": i, "at": p})),
+    let mut pairs: Vec<(f32, usize, usize)> = Vec::new();
+    for (j, p) in sa.iter().enumerate() {
+        for (i, q) in sb.iter().enumerate() {
+            let d = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt();
+            if d <= a.moved {
+                pairs.push((d, j, i));
+            }
         }
     }
-    for (j, &p) in sa.iter().enumerate() {
-        if !matches!(nearest(p, &sb), Some((_, d)) if d <= a.moved) {
-            removed.push(json!({"site": j, "at": p}));
+    pairs.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)).then(x.2.cmp(&y.2)));
+    let (mut used_a, mut used_b) = (vec![false; sa.len()], vec![false; sb.len()]);
+    let mut moved = Vec::new();
+    for (d, j, i) in pairs {
+        if used_a[j] || used_b[i] {
+            continue;
+        }
+        used_a[j] = true;
+        used_b[i] = true;
+        if d > a.same {
+            moved.push(json!({"old": j, "new": i, "from": sa[j], "to": sb[i], "distance_m": d}));
         }
     }
+    let added: Vec<Value> = (0..sb.len()).filter(|&i| !used_b[i]).map(|i| json!({"site": i, "at": sb[i]})).collect();
+    let removed: Vec<Value> = (0..sa.len()).filter(|&j| !used_a[j]).map(|j| json!({"site": j, "at": sa[j]})).collect();
     let same = changes.is_empty() && added.is_empty() && moved.is_empty() && removed.is_empty() && sa.len() == sb.len();
     let report = json!({"identical_bytes": da.bytes() == db.bytes(), "same": same, "changes": changes,
         "sites": {"old": sa.len(), "new": sb.len(), "added": added, "removed": removed, "moved": moved}});

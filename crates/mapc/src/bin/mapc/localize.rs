@@ -1,9 +1,208 @@
-//! `mapc localize` (being written).
-use crate::util::{CliResult, Ui};
+//! `mapc localize`: one JSON object (or table row) per input scan.
+
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use mapc::scanio::{self, InputFormat, ReadOptions, ScanData};
+use refloc::{localize, scratch_size, RangeScan, Scan};
+use serde_json::json;
+
+use crate::util::{input_err, open_db, CliResult, Ui};
 
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// The database.
+    pub db: PathBuf,
+    /// Scans: JSON Lines (sensor_msgs/LaserScan fields) or a CARMEN log (.gz ok); "-" reads stdin.
+    pub input: String,
+    /// Output: json (one object per line) or text (a table).
+    #[arg(long, default_value = "json")]
+    pub format: String,
+    /// Input format: auto, jsonl or carmen.
+    #[arg(long, default_value = "auto")]
+    pub input_format: String,
+    /// Field of view of CARMEN FLASER/RLASER lines (degrees) [default: 180].
+    #[arg(long, value_name = "DEG")]
+    pub fov: Option<f32>,
+    /// Maximum range when the input gives none (m).
+    #[arg(long, default_value_t = 30.0, value_name = "M")]
+    pub range_max: f32,
+    /// Ground truth in the map frame, `index ... x y theta` per line (the
+    /// shared `*-poses-in-map.txt` format): adds errors and a summary.
+    #[arg(long, value_name = "FILE")]
+    pub truth: Option<PathBuf>,
+    /// Leave the candidate list out of the JSON output.
+    #[arg(long)]
+    pub no_candidates: bool,
+}
 
-pub fn run(_a: Args, _ui: &Ui) -> CliResult {
-    Err(crate::util::fail_err(anyhow::anyhow!("not yet")))
+pub fn run(a: Args, ui: &Ui) -> CliResult {
+    let db = open_db(&a.db)?;
+    let fmt: InputFormat = a.input_format.parse().map_err(|e| input_err(anyhow::anyhow!("--input-format: {e}")))?;
+    let text = match a.format.as_str() {
+        "json" => false,
+        "text" => true,
+        other => return Err(input_err(anyhow::anyhow!("--format must be json or text, not '{other}'"))),
+    };
+    let opts = ReadOptions {
+        fov: a.fov.map(|d| d.to_radians()),
+        range_max: a.range_max,
+        ..ReadOptions::default()
+    };
+    let truth: HashMap<usize, [f64; 3]> = match &a.truth {
+        Some(p) => scanio::read_poses_in_map(p)
+            .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", p.display())))?
+            .into_iter()
+            .collect(),
+        None => HashMap::new(),
+    };
+    let reader = scanio::open_input(&a.input).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.input)))?;
+    let stdout = std::io::stdout();
+    let mut out = std::io::BufWriter::new(stdout.lock());
+    let mut scratch: Vec<u8> = Vec::new();
+    let (mut n, mut failed, mut accepted, mut correct, mut false_acc) = (0usize, 0usize, 0usize, 0usize, 0usize);
+    let mut errs: Vec<f64> = Vec::new();
+    let mut times: Vec<f64> = Vec::new();
+    if text {
+        let _ = writeln!(out, "{:<12} {:>4} {:>9} {:>9} {:>8} {:>6} {:>9} {:>8} {:>8} {:>8}", "id", "ok", "x_m", "y_m", "theta", "site", "E", "M", "M_thr", "time_ms");
+    }
+    for (k, item) in scanio::read_scans(reader, fmt, &opts).enumerate() {
+        n += 1;
+        let scan = match item {
+            Ok(s) => s,
+            Err(e) => {
+                failed += 1;
+                let line = if text {
+                    format!("{:<12} error: {}", e.id.clone().unwrap_or_else(|| format!("line {}", e.line)), e.message)
+                } else {
+                    json!({"id": e.id, "line": e.line, "error": e.message}).to_string()
+                };
+                let _ = writeln!(out, "{line}");
+                continue;
+            }
+        };
+        let need = scratch_size(db.params(), scan.data.len());
+        if scratch.len() < need {
+            scratch.resize(need, 0);
+        }
+        let input = match &scan.data {
+            ScanData::Ranges {
+                angle_min,
+                angle_increment,
+                range_min,
+                range_max,
+                ranges,
+            } => Scan::Ranges(RangeScan {
+                angle_min: *angle_min,
+                angle_increment: *angle_increment,
+                range_min: *range_min,
+                range_max: *range_max,
+                ranges,
+            }),
+            ScanData::Points { points, range_max } => Scan::Points {
+                points,
+                range_max: *range_max,
+            },
+        };
+        let t0 = Instant::now();
+        let r = localize(&db, &input, &mut scratch);
+        let time_us = t0.elapsed().as_micros() as u64;
+        times.push(time_us as f64);
+        // The truth index is the scan's position among the laser lines.
+        let scan_index = scan.id.strip_prefix("scan ").and_then(|s| s.parse().ok()).unwrap_or(k);
+        let gt = truth.get(&scan_index).copied();
+        match r {
+            Ok(l) => {
+                if l.accepted {
+                    accepted += 1;
+                }
+                let err = gt.map(|g| {
+                    let e = ((l.pose.x as f64 - g[0]).powi(2) + (l.pose.y as f64 - g[1]).powi(2)).sqrt();
+                    let et = refloc::wrap_angle(l.pose.theta - g[2] as f32).abs() as f64;
+                    (e, et)
+                });
+                if let Some((e, et)) = err {
+                    let ok = e < 0.3 && et < 5f64.to_radians();
+                    if l.accepted && ok {
+                        correct += 1;
+                        errs.push(e);
+                    } else if l.accepted {
+                        false_acc += 1;
+                    }
+                }
+                if text {
+                    let _ = writeln!(
+                        out,
+                        "{:<12} {:>4} {:>9.3} {:>9.3} {:>8.4} {:>6} {:>9.1} {:>8.1} {:>8.1} {:>8.2}{}",
+                        scan.id,
+                        if l.accepted { "yes" } else { "no" },
+                        l.pose.x,
+                        l.pose.y,
+                        l.pose.theta,
+                        l.site,
+                        l.match_score,
+                        l.vicinity,
+                        l.vicinity_threshold,
+                        time_us as f64 / 1000.0,
+                        err.map(|(e, t)| format!("  err {:.3} m {:.2} deg", e, t.to_degrees())).unwrap_or_default()
+                    );
+                } else {
+                    let mut o = json!({
+                        "id": scan.id, "accepted": l.accepted,
+                        "x": l.pose.x, "y": l.pose.y, "theta": l.pose.theta,
+                        "site": l.site, "coarse_rank": l.coarse_rank, "gamma": l.gamma,
+                        "match_score": l.match_score, "inliers": l.inliers,
+                        "vicinity": l.vicinity, "vicinity_threshold": l.vicinity_threshold,
+                        "valid_points": l.valid_points, "time_us": time_us,
+                    });
+                    if a.no_candidates {
+                        o["candidates"] = json!(l.candidates.len());
+                    } else {
+                        o["candidates"] = l
+                            .candidates
+                            .iter()
+                            .map(|c| json!({"site": c.site, "rank": c.rank, "gamma": c.gamma, "match_score": c.match_score,
+                                "has_pose": c.has_pose != 0, "x": c.x, "y": c.y, "theta": c.theta, "vicinity": c.vicinity}))
+                            .collect();
+                    }
+                    if let Some((e, et)) = err {
+                        o["truth"] = json!(gt);
+                        o["error_m"] = json!(e);
+                        o["error_rad"] = json!(et);
+                    }
+                    let _ = writeln!(out, "{o}");
+                }
+            }
+            Err(e) => {
+                // A scan that cannot be localized is a result, not a failed line.
+                if text {
+                    let _ = writeln!(out, "{:<12} {:>4} not localized: {e}", scan.id, "no");
+                } else {
+                    let _ = writeln!(out, "{}", json!({"id": scan.id, "accepted": false, "reason": e.to_string(), "time_us": time_us}));
+                }
+            }
+        }
+    }
+    let _ = out.flush();
+    if !ui.quiet {
+        times.sort_by(|a, b| a.total_cmp(b));
+        let med_t = times.get(times.len() / 2).copied().unwrap_or(0.0);
+        eprintln!("{n} scans, {failed} unreadable, {accepted} accepted, median {:.1} ms/scan", med_t / 1000.0);
+        if !truth.is_empty() {
+            errs.sort_by(|a, b| a.total_cmp(b));
+            let med = errs.get(errs.len() / 2).copied().unwrap_or(f64::NAN);
+            eprintln!(
+                "against truth: accepted and correct {} ({:.1}%), false accepts {} ({:.1}%), median position error {:.3} m",
+                correct,
+                100.0 * correct as f64 / n.max(1) as f64,
+                false_acc,
+                100.0 * false_acc as f64 / n.max(1) as f64,
+                med
+            );
+        }
+    }
+    Ok(if failed > 0 { ExitCode::from(1) } else { ExitCode::SUCCESS })
 }

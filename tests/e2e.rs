@@ -1,0 +1,219 @@
+//! End-to-end runs of the `mapc` binary on the map the project ships.
+//!
+//! Registered as an integration test of the `mapc` package (see
+//! crates/mapc/Cargo.toml) so `CARGO_BIN_EXE_mapc` points at the binary.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn mapc(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mapc"))
+        .args(args)
+        .current_dir(cwd)
+        .env("NO_COLOR", "1")
+        .output()
+        .expect("run mapc")
+}
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().unwrap()
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+fn demo_map() -> PathBuf {
+    repo().join("maps/office-demo/office-demo.yaml")
+}
+
+/// Builds the demo map once per test into its own temporary directory.
+fn built(dir: &Path, extra: &[&str]) -> PathBuf {
+    let db = dir.join("demo.refdb");
+    let map = demo_map();
+    let mut args = vec!["build", map.to_str().unwrap(), "-o", db.to_str().unwrap(), "--fit-queries", "40"];
+    args.extend_from_slice(extra);
+    let o = mapc(&args, dir);
+    assert!(o.status.success(), "build failed: {}", text(&o));
+    db
+}
+
+#[test]
+fn build_verify_info_and_determinism() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = built(dir.path(), &["--threads", "1"]);
+    let o = mapc(&["verify", db.to_str().unwrap()], dir.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let o = mapc(&["info", db.to_str().unwrap(), "--json"], dir.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(j["sites"].as_u64().unwrap() > 20);
+    assert_eq!(j["params"]["beams"], 362);
+    // Same inputs and options, two threads: byte-identical.
+    let db2 = dir.path().join("demo2.refdb");
+    let map = demo_map();
+    let o = mapc(
+        &["build", map.to_str().unwrap(), "-o", db2.to_str().unwrap(), "--fit-queries", "40", "--threads", "2"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(std::fs::read(&db).unwrap(), std::fs::read(&db2).unwrap(), "build is not deterministic across thread counts");
+    let o = mapc(&["diff", db.to_str().unwrap(), db2.to_str().unwrap()], dir.path());
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("identical"));
+}
+
+#[test]
+fn diff_reports_changes() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = built(dir.path(), &[]);
+    let b = dir.path().join("b.refdb");
+    let map = demo_map();
+    let o = mapc(
+        &["build", map.to_str().unwrap(), "-o", b.to_str().unwrap(), "--fit-queries", "40", "--site-spacing", "1.0"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let o = mapc(&["diff", a.to_str().unwrap(), b.to_str().unwrap(), "--json"], dir.path());
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(j["sites"]["new"].as_u64().unwrap() > j["sites"]["old"].as_u64().unwrap());
+    assert!(!j["sites"]["added"].as_array().unwrap().is_empty());
+}
+
+#[test]
+fn localize_a_batch_of_json_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let dbp = built(dir.path(), &[]);
+    let bytes = std::fs::read(&dbp).unwrap();
+    let mut al = vec![0u32; bytes.len().div_ceil(4)];
+    zerocopy::IntoBytes::as_mut_bytes(&mut al[..])[..bytes.len()].copy_from_slice(&bytes);
+    let db = refloc::RefDb::new(&zerocopy::IntoBytes::as_bytes(&al[..])[..bytes.len()]).unwrap();
+    let poses = mapc::eval::sample_poses(&db, 6, 0.4, 11);
+    let lidar = mapc::sim::Lidar::new(362, 2.0 * std::f32::consts::PI, 30.0);
+    let mut lines = String::new();
+    for (k, p) in poses.iter().enumerate() {
+        let ranges = mapc::sim::virtual_scan(&db.grid(), &db.frame(), p, &lidar);
+        let data = mapc::scanio::ScanData::Ranges {
+            angle_min: lidar.angle_min,
+            angle_increment: lidar.angle_increment,
+            range_min: 0.0,
+            range_max: 30.0,
+            ranges: ranges.iter().map(|r| if r.is_finite() { *r } else { f32::NAN }).collect(),
+        };
+        lines.push_str(&mapc::scanio::scan_to_json(&data, &format!("s{k}"), None));
+        lines.push('\n');
+    }
+    // One malformed line in the middle: reported, the batch goes on.
+    lines.push_str("{\"id\": \"bad\", \"angle_min\": \"x\"}\n");
+    let input = dir.path().join("scans.jsonl");
+    std::fs::write(&input, lines).unwrap();
+    let o = mapc(&["localize", dbp.to_str().unwrap(), input.to_str().unwrap()], dir.path());
+    assert_eq!(o.status.code(), Some(1), "a failed line must set the exit code: {}", text(&o));
+    let out: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(out.len(), poses.len() + 1);
+    for (k, p) in poses.iter().enumerate() {
+        let r = &out[k];
+        assert_eq!(r["id"], format!("s{k}"));
+        assert_eq!(r["accepted"], true, "{r}");
+        let (x, y) = (r["x"].as_f64().unwrap(), r["y"].as_f64().unwrap());
+        assert!(((x - p.x as f64).powi(2) + (y - p.y as f64).powi(2)).sqrt() < 0.1, "{r} vs {p:?}");
+        for key in ["theta", "site", "match_score", "vicinity", "vicinity_threshold", "candidates", "time_us"] {
+            assert!(r.get(key).is_some(), "missing {key}");
+        }
+    }
+    assert!(out.last().unwrap()["error"].as_str().unwrap().contains("angle_min"));
+    // Text output and stdin.
+    let o = Command::new(env!("CARGO_BIN_EXE_mapc"))
+        .args(["localize", dbp.to_str().unwrap(), "-", "--format", "text"])
+        .stdin(std::fs::File::open(&input).unwrap())
+        .output()
+        .unwrap();
+    assert!(String::from_utf8_lossy(&o.stdout).contains("yes"));
+}
+
+#[test]
+fn eval_check_passes_on_own_baseline_and_fails_on_a_worse_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = built(dir.path(), &[]);
+    let out = dir.path().join("eval");
+    let common = ["--poses", "60", "--experiments", "static", "--no-figures", "--seed", "3"];
+    let mut args = vec!["eval", good.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    args.extend_from_slice(&common);
+    let o = mapc(&args, dir.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let baseline = dir.path().join("baseline.json");
+    std::fs::copy(out.join("report.json"), &baseline).unwrap();
+    let mut args = vec!["eval", good.to_str().unwrap(), "--out", out.to_str().unwrap(), "--check", baseline.to_str().unwrap()];
+    args.extend_from_slice(&common);
+    let o = mapc(&args, dir.path());
+    assert!(o.status.success(), "own baseline must pass: {}", text(&o));
+    // A deliberately worse database: one candidate and no refinement.
+    let worse = dir.path().join("worse.refdb");
+    let map = demo_map();
+    let o = mapc(
+        &["build", map.to_str().unwrap(), "-o", worse.to_str().unwrap(), "--fit-queries", "40", "--nc-max", "1", "--refine-iters", "0"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let mut args = vec!["eval", worse.to_str().unwrap(), "--out", out.to_str().unwrap(), "--check", baseline.to_str().unwrap()];
+    args.extend_from_slice(&common);
+    let o = mapc(&args, dir.path());
+    assert_eq!(o.status.code(), Some(1), "a worse map must fail the check: {}", text(&o));
+    assert!(text(&o).contains("REGRESSION"));
+}
+
+#[test]
+fn bad_inputs_exit_2_and_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("out.refdb");
+    let o_str = out.to_str().unwrap();
+    // Malformed YAML.
+    std::fs::write(d.join("bad.yaml"), "image: [unclosed\nresolution: 0.05\n").unwrap();
+    let o = mapc(&["build", "bad.yaml", "-o", o_str], d);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("bad.yaml"));
+    // Missing image.
+    std::fs::write(d.join("noimg.yaml"), "image: nothere.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n").unwrap();
+    let o = mapc(&["build", "noimg.yaml", "-o", o_str], d);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("nothere.pgm"), "{}", text(&o));
+    // Zero resolution.
+    std::fs::copy(repo().join("maps/office-demo/office-demo.pgm"), d.join("m.pgm")).unwrap();
+    std::fs::write(d.join("zero.yaml"), "image: m.pgm\nresolution: 0\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n").unwrap();
+    let o = mapc(&["build", "zero.yaml", "-o", o_str], d);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("resolution"), "{}", text(&o));
+    // An image with no YAML beside it and no --resolution.
+    let o = mapc(&["build", "m.pgm", "-o", o_str], d);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("--resolution"), "{}", text(&o));
+    // ... works with --resolution.
+    let o = mapc(&["build", "m.pgm", "-o", o_str, "--resolution", "0.05", "--fit-queries", "0"], d);
+    assert!(o.status.success(), "{}", text(&o));
+    std::fs::remove_file(&out).unwrap();
+    // No free cell.
+    std::fs::write(d.join("black.pgm"), [b"P5\n8 8\n255\n".as_slice(), &[0u8; 64]].concat()).unwrap();
+    let o = mapc(&["build", "black.pgm", "-o", o_str, "--resolution", "0.05"], d);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(!out.exists(), "nothing may be written on error");
+    // Bad usage.
+    let o = mapc(&["build"], d);
+    assert_eq!(o.status.code(), Some(2));
+    // Not a database.
+    let o = mapc(&["verify", "m.pgm"], d);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+}
+
+#[test]
+fn demo_runs_from_the_repository_root() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    let o = mapc(&["demo", "--poses", "30", "--out", out.to_str().unwrap()], &repo());
+    assert!(o.status.success(), "{}", text(&o));
+    let t = text(&o);
+    assert!(t.contains("static") && t.contains("dynamic"), "{t}");
+    assert!(out.join("static-poses.png").exists());
+    assert!(out.join("report.json").exists());
+}
