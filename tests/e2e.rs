@@ -16,11 +16,18 @@ fn mapc(args: &[&str], cwd: &Path) -> Output {
 }
 
 fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().unwrap()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .canonicalize()
+        .unwrap()
 }
 
 fn text(o: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
 }
 
 fn demo_map() -> PathBuf {
@@ -31,7 +38,14 @@ fn demo_map() -> PathBuf {
 fn built(dir: &Path, extra: &[&str]) -> PathBuf {
     let db = dir.join("demo.refdb");
     let map = demo_map();
-    let mut args = vec!["build", map.to_str().unwrap(), "-o", db.to_str().unwrap(), "--fit-queries", "40"];
+    let mut args = vec![
+        "build",
+        map.to_str().unwrap(),
+        "-o",
+        db.to_str().unwrap(),
+        "--fit-queries",
+        "40",
+    ];
     args.extend_from_slice(extra);
     let o = mapc(&args, dir);
     assert!(o.status.success(), "build failed: {}", text(&o));
@@ -53,12 +67,28 @@ fn build_verify_info_and_determinism() {
     let db2 = dir.path().join("demo2.refdb");
     let map = demo_map();
     let o = mapc(
-        &["build", map.to_str().unwrap(), "-o", db2.to_str().unwrap(), "--fit-queries", "40", "--threads", "2"],
+        &[
+            "build",
+            map.to_str().unwrap(),
+            "-o",
+            db2.to_str().unwrap(),
+            "--fit-queries",
+            "40",
+            "--threads",
+            "2",
+        ],
         dir.path(),
     );
     assert!(o.status.success(), "{}", text(&o));
-    assert_eq!(std::fs::read(&db).unwrap(), std::fs::read(&db2).unwrap(), "build is not deterministic across thread counts");
-    let o = mapc(&["diff", db.to_str().unwrap(), db2.to_str().unwrap()], dir.path());
+    assert_eq!(
+        std::fs::read(&db).unwrap(),
+        std::fs::read(&db2).unwrap(),
+        "build is not deterministic across thread counts"
+    );
+    let o = mapc(
+        &["diff", db.to_str().unwrap(), db2.to_str().unwrap()],
+        dir.path(),
+    );
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("identical"));
 }
@@ -70,11 +100,23 @@ fn diff_reports_changes() {
     let b = dir.path().join("b.refdb");
     let map = demo_map();
     let o = mapc(
-        &["build", map.to_str().unwrap(), "-o", b.to_str().unwrap(), "--fit-queries", "40", "--site-spacing", "1.0"],
+        &[
+            "build",
+            map.to_str().unwrap(),
+            "-o",
+            b.to_str().unwrap(),
+            "--fit-queries",
+            "40",
+            "--site-spacing",
+            "1.0",
+        ],
         dir.path(),
     );
     assert!(o.status.success(), "{}", text(&o));
-    let o = mapc(&["diff", a.to_str().unwrap(), b.to_str().unwrap(), "--json"], dir.path());
+    let o = mapc(
+        &["diff", a.to_str().unwrap(), b.to_str().unwrap(), "--json"],
+        dir.path(),
+    );
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(j["sites"]["new"].as_u64().unwrap() > j["sites"]["old"].as_u64().unwrap());
@@ -99,7 +141,10 @@ fn localize_a_batch_of_json_lines() {
             angle_increment: lidar.angle_increment,
             range_min: 0.0,
             range_max: 30.0,
-            ranges: ranges.iter().map(|r| if r.is_finite() { *r } else { f32::NAN }).collect(),
+            ranges: ranges
+                .iter()
+                .map(|r| if r.is_finite() { *r } else { f32::NAN })
+                .collect(),
         };
         lines.push_str(&mapc::scanio::scan_to_json(&data, &format!("s{k}"), None));
         lines.push('\n');
@@ -108,21 +153,46 @@ fn localize_a_batch_of_json_lines() {
     lines.push_str("{\"id\": \"bad\", \"angle_min\": \"x\"}\n");
     let input = dir.path().join("scans.jsonl");
     std::fs::write(&input, lines).unwrap();
-    let o = mapc(&["localize", dbp.to_str().unwrap(), input.to_str().unwrap()], dir.path());
-    assert_eq!(o.status.code(), Some(1), "a failed line must set the exit code: {}", text(&o));
-    let out: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let o = mapc(
+        &["localize", dbp.to_str().unwrap(), input.to_str().unwrap()],
+        dir.path(),
+    );
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "a failed line must set the exit code: {}",
+        text(&o)
+    );
+    let out: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
     assert_eq!(out.len(), poses.len() + 1);
     for (k, p) in poses.iter().enumerate() {
         let r = &out[k];
         assert_eq!(r["id"], format!("s{k}"));
         assert_eq!(r["accepted"], true, "{r}");
         let (x, y) = (r["x"].as_f64().unwrap(), r["y"].as_f64().unwrap());
-        assert!(((x - p.x as f64).powi(2) + (y - p.y as f64).powi(2)).sqrt() < 0.1, "{r} vs {p:?}");
-        for key in ["theta", "site", "match_score", "vicinity", "vicinity_threshold", "candidates", "time_us"] {
+        assert!(
+            ((x - p.x as f64).powi(2) + (y - p.y as f64).powi(2)).sqrt() < 0.1,
+            "{r} vs {p:?}"
+        );
+        for key in [
+            "theta",
+            "site",
+            "match_score",
+            "vicinity",
+            "vicinity_threshold",
+            "candidates",
+            "time_us",
+        ] {
             assert!(r.get(key).is_some(), "missing {key}");
         }
     }
-    assert!(out.last().unwrap()["error"].as_str().unwrap().contains("angle_min"));
+    assert!(out.last().unwrap()["error"]
+        .as_str()
+        .unwrap()
+        .contains("angle_min"));
     // Text output and stdin.
     let o = Command::new(env!("CARGO_BIN_EXE_mapc"))
         .args(["localize", dbp.to_str().unwrap(), "-", "--format", "text"])
@@ -137,14 +207,34 @@ fn eval_check_passes_on_own_baseline_and_fails_on_a_worse_map() {
     let dir = tempfile::tempdir().unwrap();
     let good = built(dir.path(), &[]);
     let out = dir.path().join("eval");
-    let common = ["--poses", "60", "--experiments", "static", "--no-figures", "--seed", "3"];
-    let mut args = vec!["eval", good.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    let common = [
+        "--poses",
+        "60",
+        "--experiments",
+        "static",
+        "--no-figures",
+        "--seed",
+        "3",
+    ];
+    let mut args = vec![
+        "eval",
+        good.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
     args.extend_from_slice(&common);
     let o = mapc(&args, dir.path());
     assert!(o.status.success(), "{}", text(&o));
     let baseline = dir.path().join("baseline.json");
     std::fs::copy(out.join("report.json"), &baseline).unwrap();
-    let mut args = vec!["eval", good.to_str().unwrap(), "--out", out.to_str().unwrap(), "--check", baseline.to_str().unwrap()];
+    let mut args = vec![
+        "eval",
+        good.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--check",
+        baseline.to_str().unwrap(),
+    ];
     args.extend_from_slice(&common);
     let o = mapc(&args, dir.path());
     assert!(o.status.success(), "own baseline must pass: {}", text(&o));
@@ -152,14 +242,37 @@ fn eval_check_passes_on_own_baseline_and_fails_on_a_worse_map() {
     let worse = dir.path().join("worse.refdb");
     let map = demo_map();
     let o = mapc(
-        &["build", map.to_str().unwrap(), "-o", worse.to_str().unwrap(), "--fit-queries", "40", "--nc-max", "1", "--refine-iters", "0"],
+        &[
+            "build",
+            map.to_str().unwrap(),
+            "-o",
+            worse.to_str().unwrap(),
+            "--fit-queries",
+            "40",
+            "--nc-max",
+            "1",
+            "--refine-iters",
+            "0",
+        ],
         dir.path(),
     );
     assert!(o.status.success(), "{}", text(&o));
-    let mut args = vec!["eval", worse.to_str().unwrap(), "--out", out.to_str().unwrap(), "--check", baseline.to_str().unwrap()];
+    let mut args = vec![
+        "eval",
+        worse.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--check",
+        baseline.to_str().unwrap(),
+    ];
     args.extend_from_slice(&common);
     let o = mapc(&args, dir.path());
-    assert_eq!(o.status.code(), Some(1), "a worse map must fail the check: {}", text(&o));
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "a worse map must fail the check: {}",
+        text(&o)
+    );
     assert!(text(&o).contains("REGRESSION"));
 }
 
@@ -180,7 +293,11 @@ fn bad_inputs_exit_2_and_write_nothing() {
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(text(&o).contains("nothere.pgm"), "{}", text(&o));
     // Zero resolution.
-    std::fs::copy(repo().join("maps/office-demo/office-demo.pgm"), d.join("m.pgm")).unwrap();
+    std::fs::copy(
+        repo().join("maps/office-demo/office-demo.pgm"),
+        d.join("m.pgm"),
+    )
+    .unwrap();
     std::fs::write(d.join("zero.yaml"), "image: m.pgm\nresolution: 0\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n").unwrap();
     let o = mapc(&["build", "zero.yaml", "-o", o_str], d);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
@@ -190,12 +307,31 @@ fn bad_inputs_exit_2_and_write_nothing() {
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(text(&o).contains("--resolution"), "{}", text(&o));
     // ... works with --resolution.
-    let o = mapc(&["build", "m.pgm", "-o", o_str, "--resolution", "0.05", "--fit-queries", "0"], d);
+    let o = mapc(
+        &[
+            "build",
+            "m.pgm",
+            "-o",
+            o_str,
+            "--resolution",
+            "0.05",
+            "--fit-queries",
+            "0",
+        ],
+        d,
+    );
     assert!(o.status.success(), "{}", text(&o));
     std::fs::remove_file(&out).unwrap();
     // No free cell.
-    std::fs::write(d.join("black.pgm"), [b"P5\n8 8\n255\n".as_slice(), &[0u8; 64]].concat()).unwrap();
-    let o = mapc(&["build", "black.pgm", "-o", o_str, "--resolution", "0.05"], d);
+    std::fs::write(
+        d.join("black.pgm"),
+        [b"P5\n8 8\n255\n".as_slice(), &[0u8; 64]].concat(),
+    )
+    .unwrap();
+    let o = mapc(
+        &["build", "black.pgm", "-o", o_str, "--resolution", "0.05"],
+        d,
+    );
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(!out.exists(), "nothing may be written on error");
     // Bad usage.
@@ -210,7 +346,10 @@ fn bad_inputs_exit_2_and_write_nothing() {
 fn demo_runs_from_the_repository_root() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");
-    let o = mapc(&["demo", "--poses", "30", "--out", out.to_str().unwrap()], &repo());
+    let o = mapc(
+        &["demo", "--poses", "30", "--out", out.to_str().unwrap()],
+        &repo(),
+    );
     assert!(o.status.success(), "{}", text(&o));
     let t = text(&o);
     assert!(t.contains("static") && t.contains("dynamic"), "{t}");

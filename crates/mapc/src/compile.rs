@@ -4,7 +4,7 @@
 //! on the map's own simulated scans, and the build manifest.
 
 use rayon::prelude::*;
-use refloc::format::{MetaRecord, SectionKind, SiteRecord, DIST_STEPS_PER_CELL};
+use refloc::format::{dist_encode, MetaRecord, SectionKind, SiteRecord};
 use refloc::params::Params;
 use refloc::raycast::BitGrid;
 use refloc::{pgr, prep, MapFrame, Pose2};
@@ -80,11 +80,23 @@ pub fn ref_lidar(params: &Params) -> Lidar {
 
 /// Reference scan ranges of every site (m; `INFINITY` for no return). The
 /// sensor sits on the site, heading along the map's +x axis.
-pub fn reference_scans(grid: &BitGrid<'_>, frame: &MapFrame, sites: &[SiteIn], params: &Params) -> Vec<Vec<f32>> {
+pub fn reference_scans(
+    grid: &BitGrid<'_>,
+    frame: &MapFrame,
+    sites: &[SiteIn],
+    params: &Params,
+) -> Vec<Vec<f32>> {
     let lidar = ref_lidar(params);
     sites
         .par_iter()
-        .map(|s| sim::virtual_scan(grid, frame, &Pose2::new(s.x as f32, s.y as f32, 0.0), &lidar))
+        .map(|s| {
+            sim::virtual_scan(
+                grid,
+                frame,
+                &Pose2::new(s.x as f32, s.y as f32, 0.0),
+                &lidar,
+            )
+        })
         .collect()
 }
 
@@ -92,25 +104,100 @@ pub fn reference_scans(grid: &BitGrid<'_>, frame: &MapFrame, sites: &[SiteIn], p
 pub fn scan_histogram(ranges: &[f32], params: &Params) -> Vec<f32> {
     let s = &params.sensor;
     let mut dense = vec![[0f32; 2]; ranges.len()];
-    let n = prep::ranges_to_points(ranges, s.angle_min, s.angle_increment, s.range_min, s.range_max, &mut dense);
+    let n = prep::ranges_to_points(
+        ranges,
+        s.angle_min,
+        s.angle_increment,
+        s.range_min,
+        s.range_max,
+        &mut dense,
+    );
     let p = params.max_points as usize;
     let (mut pts, mut tan) = (vec![[0f32; 2]; p], vec![[0f32; 2]; p]);
-    let wrap = s.angle_increment * s.beams as f32 >= 2.0 * std::f32::consts::PI - 1.5 * s.angle_increment;
+    let wrap =
+        s.angle_increment * s.beams as f32 >= 2.0 * std::f32::consts::PI - 1.5 * s.angle_increment;
     let m = prep::prepare(&dense[..n], wrap, params, &mut pts, &mut tan);
     let mut h = vec![0f32; params.hist_cells()];
     pgr::histogram(&pts[..m], &tan[..m], params, &mut h);
     h
 }
 
-/// The quantized distance map: distance from each cell centre to the nearest
-/// obstacle *surface* (centre distance minus half a cell), in
-/// `resolution / DIST_STEPS_PER_CELL` units, saturating at 255.
-pub fn dist_section(sq_dist: &[f32]) -> Vec<u8> {
-    sq_dist
+/// Window histograms of one site's reference scan (see `refloc::coarse`):
+/// for each used width and each heading `h * 2 pi / win_headings` (map
+/// frame), the histogram of the beams within `width / 2` of that heading.
+pub fn window_histograms(ranges: &[f32], params: &Params) -> Vec<f32> {
+    let s = &params.sensor;
+    let mut dense = vec![[0f32; 2]; ranges.len()];
+    prep::ranges_to_points(
+        ranges,
+        s.angle_min,
+        s.angle_increment,
+        s.range_min,
+        s.range_max,
+        &mut dense,
+    );
+    let p = params.max_points as usize;
+    let (mut pts, mut tan) = (vec![[0f32; 2]; p], vec![[0f32; 2]; p]);
+    let k = params.win_cells();
+    let nh = params.win_headings as usize;
+    let mut out = Vec::with_capacity(params.win_count() * nh * k);
+    let mut window: Vec<[f32; 2]> = Vec::with_capacity(ranges.len());
+    for &width in &params.win_widths[..params.win_count()] {
+        for h in 0..nh {
+            let heading = h as f32 * 2.0 * std::f32::consts::PI / nh as f32;
+            // Beams within width/2 of the heading, in counter-clockwise order
+            // starting at heading - width/2.
+            let first = heading - width / 2.0;
+            window.clear();
+            let n = ranges.len();
+            // The first beam of the window: the smallest angle offset from `first`.
+            let start = (0..n)
+                .min_by(|&x, &y| {
+                    let ox = (s.angle_min + x as f32 * s.angle_increment - first)
+                        .rem_euclid(2.0 * std::f32::consts::PI);
+                    let oy = (s.angle_min + y as f32 * s.angle_increment - first)
+                        .rem_euclid(2.0 * std::f32::consts::PI);
+                    ox.total_cmp(&oy)
+                })
+                .unwrap_or(0);
+            let count = ((width / s.angle_increment).round() as usize).min(n);
+            for j in 0..count {
+                window.push(dense[(start + j) % n]);
+            }
+            let m = prep::prepare(&window, false, params, &mut pts, &mut tan);
+            let mut hh = vec![0f32; k];
+            pgr::histogram_binned(
+                &pts[..m],
+                &tan[..m],
+                params.win_rho_bins as usize,
+                params.win_theta_bins as usize,
+                params.hist_rho_max,
+                &mut hh,
+            );
+            out.extend_from_slice(&hh);
+        }
+    }
+    out
+}
+
+/// The quantized signed distance map: for a free cell, the distance from
+/// its centre to the nearest obstacle cell centre minus half a cell; for an
+/// obstacle cell, minus (the distance to the nearest free cell centre minus
+/// half a cell). Interpolated between centres, its zero then lies on the
+/// boundary between free and obstacle cells, where a beam stops.
+/// `sq_out`: squared distances (cells^2) to obstacles; `sq_in`: squared
+/// distances from obstacle cells to free cells.
+pub fn dist_section(sq_out: &[f32], sq_in: &[f32]) -> Vec<u8> {
+    sq_out
         .iter()
-        .map(|&d2| {
-            let d = (d2.max(0.0).sqrt() - 0.5).max(0.0);
-            (d * DIST_STEPS_PER_CELL).round().min(255.0) as u8
+        .zip(sq_in)
+        .map(|(&o, &i)| {
+            let d = if o > 0.0 {
+                o.sqrt() - 0.5
+            } else {
+                -(i.max(0.0).sqrt() - 0.5).max(0.0)
+            };
+            dist_encode(d)
         })
         .collect()
 }
@@ -118,11 +205,16 @@ pub fn dist_section(sq_dist: &[f32]) -> Vec<u8> {
 /// Compiles everything but the manifest, which the caller appends.
 pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, String> {
     let mut params = input.params;
-    params.validate().map_err(|f| format!("invalid parameter: {f}"))?;
+    params
+        .validate()
+        .map_err(|f| format!("invalid parameter: {f}"))?;
     if sites.is_empty() {
-        return Err("no reference sites: the map has no free space wide enough for the robot".into());
+        return Err(
+            "no reference sites: the map has no free space wide enough for the robot".into(),
+        );
     }
-    let grid = BitGrid::new(input.width, input.height, input.blocked).ok_or("grid bits shorter than the grid")?;
+    let grid = BitGrid::new(input.width, input.height, input.blocked)
+        .ok_or("grid bits shorter than the grid")?;
     let frame = input.frame;
     let scans = reference_scans(&grid, &frame, sites, &params);
     // Logistic weights from the map's own simulated scans.
@@ -140,7 +232,16 @@ pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, S
     };
     let site_xy: Vec<[f32; 2]> = sites.iter().map(|s| [s.x as f32, s.y as f32]).collect();
     let fit = if input.fit_queries > 0 {
-        fit::fit_weights(&grid, &frame, &clearance_ok, &site_xy, &scans, &params, input.fit_queries, input.fit_seed)
+        fit::fit_weights(
+            &grid,
+            &frame,
+            &clearance_ok,
+            &site_xy,
+            &scans,
+            &params,
+            input.fit_queries,
+            input.fit_seed,
+        )
     } else {
         FitReport {
             queries: 0,
@@ -151,8 +252,17 @@ pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, S
         }
     };
     params.w = fit.w;
-    params.validate().map_err(|f| format!("invalid fitted parameter: {f}"))?;
-    let hists: Vec<Vec<f32>> = scans.par_iter().map(|s| scan_histogram(s, &params)).collect();
+    params
+        .validate()
+        .map_err(|f| format!("invalid fitted parameter: {f}"))?;
+    let hists: Vec<Vec<f32>> = scans
+        .par_iter()
+        .map(|s| scan_histogram(s, &params))
+        .collect();
+    let windows: Vec<Vec<f32>> = scans
+        .par_iter()
+        .map(|s| window_histograms(s, &params))
+        .collect();
 
     let meta = MetaRecord {
         width: U32::new(input.width),
@@ -171,7 +281,12 @@ pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, S
         .iter()
         .map(|s| {
             let start = neighbours.len() as u32;
-            neighbours.extend(s.neighbours.iter().copied().filter(|&n| (n as usize) < sites.len()));
+            neighbours.extend(
+                s.neighbours
+                    .iter()
+                    .copied()
+                    .filter(|&n| (n as usize) < sites.len()),
+            );
             SiteRecord {
                 x: F32::new(s.x as f32),
                 y: F32::new(s.y as f32),
@@ -182,8 +297,14 @@ pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, S
             }
         })
         .collect();
-    let scan_bytes: Vec<u8> = scans.iter().flat_map(|s| s.iter().flat_map(|v| v.to_le_bytes())).collect();
-    let hist_bytes: Vec<u8> = hists.iter().flat_map(|s| s.iter().flat_map(|v| v.to_le_bytes())).collect();
+    let scan_bytes: Vec<u8> = scans
+        .iter()
+        .flat_map(|s| s.iter().flat_map(|v| v.to_le_bytes()))
+        .collect();
+    let hist_bytes: Vec<u8> = hists
+        .iter()
+        .flat_map(|s| s.iter().flat_map(|v| v.to_le_bytes()))
+        .collect();
     let grid_bytes: Vec<u8> = input.blocked[..BitGrid::words_for(input.width, input.height)]
         .iter()
         .flat_map(|w| w.to_le_bytes())
@@ -192,11 +313,28 @@ pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, S
         (SectionKind::Meta, meta.as_bytes().to_vec()),
         (SectionKind::Params, params.to_record().as_bytes().to_vec()),
         (SectionKind::Grid, grid_bytes),
-        (SectionKind::Dist, dist_section(input.sq_dist)),
+        (SectionKind::Dist, {
+            let bits = grid;
+            let (w, h) = (input.width as usize, input.height as usize);
+            let sq_in = crate::edt::squared_edt(w, h, |i| {
+                !refloc::raycast::Occupancy::blocked(&bits, (i % w) as u32, (i / w) as u32)
+            });
+            dist_section(input.sq_dist, &sq_in)
+        }),
         (SectionKind::Sites, site_records.as_bytes().to_vec()),
-        (SectionKind::Neighbors, neighbours.iter().flat_map(|n| n.to_le_bytes()).collect()),
+        (
+            SectionKind::Neighbors,
+            neighbours.iter().flat_map(|n| n.to_le_bytes()).collect(),
+        ),
         (SectionKind::Scans, scan_bytes),
         (SectionKind::Hists, hist_bytes),
+        (
+            SectionKind::Windows,
+            windows
+                .iter()
+                .flat_map(|s| s.iter().flat_map(|v| v.to_le_bytes()))
+                .collect(),
+        ),
     ];
     Ok(Compiled {
         sections,

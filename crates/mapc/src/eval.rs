@@ -17,7 +17,6 @@
 //! not depend on the thread count.
 
 use rayon::prelude::*;
-use refloc::params::Params;
 use refloc::raycast::{cast, BitGrid};
 use refloc::ssm::{self, SsmWork, DESC_LEN};
 use refloc::{localize, prep, scratch_size, MapFrame, Pose2, RangeScan, RefDb, Scan};
@@ -76,6 +75,8 @@ pub struct Trial {
     pub nc: usize,
     /// Query time (microseconds).
     pub time_us: u64,
+    /// Vicinity score as a share of its maximum, `M / (4.5 N_P)`.
+    pub vicinity_ratio: f64,
     /// Error message when localization returned an error.
     pub error: Option<String>,
 }
@@ -83,7 +84,8 @@ pub struct Trial {
 impl Trial {
     /// Accepted with position error < 0.3 m and heading error < 5 degrees.
     pub fn correct(&self) -> bool {
-        self.accepted && matches!((self.err_pos, self.err_theta), (Some(p), Some(t)) if p < CORRECT_POS && t < CORRECT_THETA)
+        self.accepted
+            && matches!((self.err_pos, self.err_theta), (Some(p), Some(t)) if p < CORRECT_POS && t < CORRECT_THETA)
     }
 }
 
@@ -143,7 +145,11 @@ pub fn summarize(trials: &[Trial]) -> Summary {
         .iter()
         .filter_map(|t| {
             let e = t.est?;
-            Some([(e[0] - t.truth[0]).abs(), (e[1] - t.truth[1]).abs(), t.err_theta?])
+            Some([
+                (e[0] - t.truth[0]).abs(),
+                (e[1] - t.truth[1]).abs(),
+                t.err_theta?,
+            ])
         })
         .collect();
     if !errs.is_empty() {
@@ -160,9 +166,16 @@ pub fn summarize(trials: &[Trial]) -> Summary {
     let times: Vec<f64> = trials.iter().map(|t| t.time_us as f64).collect();
     s.median_time_us = median(times.clone());
     s.mean_time_us = times.iter().sum::<f64>() / n as f64;
-    let with_site = trials.iter().filter(|t| t.correct_rank.is_some()).count().max(1);
-    s.correct_site_recall =
-        trials.iter().filter(|t| matches!(t.correct_rank, Some(r) if r < t.nc)).count() as f64 / with_site as f64;
+    let with_site = trials
+        .iter()
+        .filter(|t| t.correct_rank.is_some())
+        .count()
+        .max(1);
+    s.correct_site_recall = trials
+        .iter()
+        .filter(|t| matches!(t.correct_rank, Some(r) if r < t.nc))
+        .count() as f64
+        / with_site as f64;
     s
 }
 
@@ -182,25 +195,40 @@ pub fn median(mut v: Vec<f64>) -> f64 {
 
 /// Free-space poses for sampling: cells with clearance >= `clearance` (m),
 /// read from the database's distance map.
-pub fn sample_poses<D: AsRef<[u8]>>(db: &RefDb<D>, n: usize, clearance: f32, seed: u64) -> Vec<Pose2> {
+pub fn sample_poses<D: AsRef<[u8]>>(
+    db: &RefDb<D>,
+    n: usize,
+    clearance: f32,
+    seed: u64,
+) -> Vec<Pose2> {
     let (w, h) = db.grid_size();
     let frame = db.frame();
-    let unit = frame.resolution / refloc::format::DIST_STEPS_PER_CELL;
     let dist = db.dist();
     let grid = db.grid();
     // Distance to surface + half a cell = distance to obstacle cell centre.
     let ok = |i: usize| {
-        let d = dist.get(i).copied().unwrap_or(0) as f32 * unit;
+        let d = refloc::format::dist_cells(dist.get(i).copied().unwrap_or(0)) * frame.resolution;
         let (cx, cy) = ((i % w as usize) as u32, (i / w as usize) as u32);
-        d + 0.5 * frame.resolution >= clearance && !refloc::raycast::Occupancy::blocked(&grid, cx, cy)
+        d + 0.5 * frame.resolution >= clearance
+            && !refloc::raycast::Occupancy::blocked(&grid, cx, cy)
     };
     sample_poses_where(w, h, &frame, ok, n, seed)
 }
 
 /// Poses uniformly over the largest 4-connected region of cells for which
 /// `ok(index)` holds, headings uniform; pose `k` uses `Rng::stream(seed, k)`.
-pub fn sample_poses_where(w: u32, h: u32, frame: &MapFrame, ok: impl Fn(usize) -> bool, n: usize, seed: u64) -> Vec<Pose2> {
-    let cells: Vec<u32> = (0..(w as usize * h as usize)).filter(|&i| ok(i)).map(|i| i as u32).collect();
+pub fn sample_poses_where(
+    w: u32,
+    h: u32,
+    frame: &MapFrame,
+    ok: impl Fn(usize) -> bool,
+    n: usize,
+    seed: u64,
+) -> Vec<Pose2> {
+    let cells: Vec<u32> = (0..(w as usize * h as usize))
+        .filter(|&i| ok(i))
+        .map(|i| i as u32)
+        .collect();
     // Keep the largest 4-connected region of such cells: the building, not
     // isolated pockets of free space outside it.
     let cells = largest_region(&cells, w, h);
@@ -212,9 +240,16 @@ pub fn sample_poses_where(w: u32, h: u32, frame: &MapFrame, ok: impl Fn(usize) -
             let mut r = Rng::stream(seed, k as u64);
             let c = cells[r.below(cells.len() as u64) as usize] as usize;
             let (cx, cy) = (c % w as usize, c / w as usize);
-            let uv = [cx as f32 + r.uniform() as f32, cy as f32 + r.uniform() as f32];
+            let uv = [
+                cx as f32 + r.uniform() as f32,
+                cy as f32 + r.uniform() as f32,
+            ];
             let p = frame.to_map(uv);
-            Pose2::new(p[0], p[1], r.range(-std::f64::consts::PI, std::f64::consts::PI) as f32)
+            Pose2::new(
+                p[0],
+                p[1],
+                r.range(-std::f64::consts::PI, std::f64::consts::PI) as f32,
+            )
         })
         .collect()
 }
@@ -262,7 +297,11 @@ fn largest_region(cells: &[u32], w: u32, h: u32) -> Vec<u32> {
         }
         next += 1;
     }
-    cells.iter().copied().filter(|&c| label[c as usize] == best.0).collect()
+    cells
+        .iter()
+        .copied()
+        .filter(|&c| label[c as usize] == best.0)
+        .collect()
 }
 
 /// The correct site for a true sensor position: the nearest site with a
@@ -286,33 +325,42 @@ pub fn correct_site<D: AsRef<[u8]>>(db: &RefDb<D>, p: [f32; 2]) -> Option<usize>
     best.map(|b| b.0)
 }
 
-/// Coarse rank (0 = best) of `site` for an input histogram.
-pub fn coarse_rank<D: AsRef<[u8]>>(db: &RefDb<D>, hist: &[f32], site: usize) -> usize {
-    let g = refloc::coarse::correlation(hist, db.hist(site));
+/// The coarse stage of a query exactly as the localizer runs it: every
+/// site's score (see `refloc::coarse::site_score`), from beam-ordered dense
+/// points covering `fov` radians.
+pub fn coarse_scores<D: AsRef<[u8]>>(
+    db: &RefDb<D>,
+    dense: &[[f32; 2]],
+    fov: f32,
+    wrap: bool,
+) -> Vec<f32> {
+    let params = db.params();
+    let p = params.max_points as usize;
+    let (mut qp, mut qt) = (vec![[0f32; 2]; p], vec![[0f32; 2]; p]);
+    let mut h = vec![0f32; params.hist_cells().max(params.win_cells())];
+    let (window, cells) =
+        refloc::coarse::query_histogram(dense, fov, wrap, params, &mut qp, &mut qt, &mut h);
     (0..db.site_count())
-        .filter(|&s| {
-            let v = refloc::coarse::correlation(hist, db.hist(s));
-            v > g || (v == g && s < site)
-        })
+        .map(|s| refloc::coarse::site_score(db, &h[..cells], window, s))
+        .collect()
+}
+
+/// Coarse rank (0 = best; ties by lower index) of `site` given all scores.
+pub fn coarse_rank(scores: &[f32], site: usize) -> usize {
+    let g = scores.get(site).copied().unwrap_or(f32::NEG_INFINITY);
+    scores
+        .iter()
+        .enumerate()
+        .filter(|&(s, &v)| v > g || (v == g && s < site))
         .count()
 }
 
-/// N_C for an input histogram, by the database's rule.
-pub fn coarse_nc<D: AsRef<[u8]>>(db: &RefDb<D>, hist: &[f32]) -> usize {
+/// N_C for the given scores, by the database's rule.
+pub fn coarse_nc<D: AsRef<[u8]>>(db: &RefDb<D>, scores: &[f32]) -> usize {
     let p = db.params();
     let mut top = vec![refloc::coarse::Ranked::default(); p.nc_max as usize];
-    let n = refloc::coarse::rank_top(hist, (0..db.site_count()).map(|s| db.hist(s)), &mut top);
+    let n = refloc::coarse::rank_top_scores(scores.iter().copied(), &mut top);
     refloc::coarse::candidate_count(&top[..n], p.nc_min as usize, p.nc_max as usize, p.nc_margin)
-}
-
-/// Histogram of an input scan exactly as the localizer computes it.
-pub fn input_histogram(points: &[[f32; 2]], wrap: bool, params: &Params) -> Vec<f32> {
-    let p = params.max_points as usize;
-    let (mut qp, mut qt) = (vec![[0f32; 2]; p], vec![[0f32; 2]; p]);
-    let n = prep::prepare(points, wrap, params, &mut qp, &mut qt);
-    let mut h = vec![0f32; params.hist_cells()];
-    refloc::pgr::histogram(&qp[..n], &qt[..n], params, &mut h);
-    h
 }
 
 /// A simulated scan at `truth` (robot pose) seen through `db`'s grid (or
@@ -325,7 +373,13 @@ pub struct SimScan {
 }
 
 /// Simulates a scan.
-pub fn simulate(grid: &BitGrid<'_>, frame: &MapFrame, sensor: &Pose2, spec: &ScanSpec, rng: &mut Rng) -> SimScan {
+pub fn simulate(
+    grid: &BitGrid<'_>,
+    frame: &MapFrame,
+    sensor: &Pose2,
+    spec: &ScanSpec,
+    rng: &mut Rng,
+) -> SimScan {
     let lidar = spec.lidar();
     let mut ranges = sim::virtual_scan(grid, frame, sensor, &lidar);
     sim::add_noise(
@@ -409,17 +463,26 @@ pub fn run_e4<D: AsRef<[u8]> + Sync>(
                     candidates: 0,
                     nc: 0,
                     time_us,
+                    vicinity_ratio: 0.0,
                     error: None,
                 };
                 match r {
                     Ok(l) => {
                         trial.est = Some([l.pose.x as f64, l.pose.y as f64, l.pose.theta as f64]);
                         trial.accepted = l.accepted;
+                        // threshold = 4.5 N_P accept_ratio, so M / (4.5 N_P) = M / threshold * ratio.
+                        if l.vicinity_threshold > 0.0 {
+                            trial.vicinity_ratio = (l.vicinity / l.vicinity_threshold
+                                * db.params().accept_ratio)
+                                as f64;
+                        }
                         trial.candidates = l.candidates.len();
                         if foreign.is_none() {
-                            let (dx, dy) = ((l.pose.x - truth.x) as f64, (l.pose.y - truth.y) as f64);
+                            let (dx, dy) =
+                                ((l.pose.x - truth.x) as f64, (l.pose.y - truth.y) as f64);
                             trial.err_pos = Some((dx * dx + dy * dy).sqrt());
-                            trial.err_theta = Some(refloc::wrap_angle(l.pose.theta - truth.theta).abs() as f64);
+                            trial.err_theta =
+                                Some(refloc::wrap_angle(l.pose.theta - truth.theta).abs() as f64);
                         }
                     }
                     Err(e) => trial.error = Some(e.to_string()),
@@ -430,14 +493,26 @@ pub fn run_e4<D: AsRef<[u8]> + Sync>(
                             Some(p) => p.clone(),
                             None => {
                                 let mut d = vec![[0f32; 2]; s.ranges.len()];
-                                prep::ranges_to_points(&s.ranges, lidar.angle_min, lidar.angle_increment, lidar.range_min, lidar.range_max, &mut d);
+                                prep::ranges_to_points(
+                                    &s.ranges,
+                                    lidar.angle_min,
+                                    lidar.angle_increment,
+                                    lidar.range_min,
+                                    lidar.range_max,
+                                    &mut d,
+                                );
                                 d
                             }
                         };
                         let full = spec.fov >= 2.0 * std::f32::consts::PI - 1e-3;
-                        let h = input_histogram(&pts, full, db.params());
-                        trial.correct_rank = Some(coarse_rank(db, &h, site));
-                        trial.nc = coarse_nc(db, &h);
+                        let fov = if full {
+                            2.0 * std::f32::consts::PI
+                        } else {
+                            lidar.angle_increment * lidar.beams as f32
+                        };
+                        let scores = coarse_scores(db, &pts, fov, full);
+                        trial.correct_rank = Some(coarse_rank(&scores, site));
+                        trial.nc = coarse_nc(db, &scores);
                     }
                 }
                 progress();
@@ -475,7 +550,14 @@ pub fn ssm_trial<D: AsRef<[u8]>>(
     let frame = db.frame();
     let ranges = sim::virtual_scan(&grid, &frame, pose, &lidar);
     let mut ref_pts = vec![[0f32; 2]; ranges.len()];
-    prep::ranges_to_points(&ranges, lidar.angle_min, lidar.angle_increment, lidar.range_min, lidar.range_max, &mut ref_pts);
+    prep::ranges_to_points(
+        &ranges,
+        lidar.angle_min,
+        lidar.angle_increment,
+        lidar.range_min,
+        lidar.range_max,
+        &mut ref_pts,
+    );
     // Disturbed copy: noise along each point, swap outliers, then a rigid motion.
     let motion = Pose2::new(
         rng.range(-max_shift as f64, max_shift as f64) as f32,
@@ -486,7 +568,10 @@ pub fn ssm_trial<D: AsRef<[u8]>>(
         .iter()
         .map(|p| {
             if p[0].is_finite() {
-                [p[0] + noise * rng.normal() as f32, p[1] + noise * rng.normal() as f32]
+                [
+                    p[0] + noise * rng.normal() as f32,
+                    p[1] + noise * rng.normal() as f32,
+                ]
             } else {
                 *p
             }
@@ -496,16 +581,27 @@ pub fn ssm_trial<D: AsRef<[u8]>>(
     sim::swap_outliers(&mut q, outliers, rng);
     // q_moved = motion^-1 * q, so that the true input->reference transform is `motion`.
     let inv = motion.inverse();
-    let q: Vec<[f32; 2]> = q.iter().map(|p| if p[0].is_finite() { inv.apply(*p) } else { *p }).collect();
+    let q: Vec<[f32; 2]> = q
+        .iter()
+        .map(|p| if p[0].is_finite() { inv.apply(*p) } else { *p })
+        .collect();
     let np = params.max_points as usize;
-    let (mut qp, mut qt, mut rp, mut rt) = (vec![[0f32; 2]; np], vec![[0f32; 2]; np], vec![[0f32; 2]; np], vec![[0f32; 2]; np]);
+    let (mut qp, mut qt, mut rp, mut rt) = (
+        vec![[0f32; 2]; np],
+        vec![[0f32; 2]; np],
+        vec![[0f32; 2]; np],
+        vec![[0f32; 2]; np],
+    );
     let nq = prep::prepare(&q, true, params, &mut qp, &mut qt);
     let nr = prep::prepare(&ref_pts, true, params, &mut rp, &mut rt);
     let nl = np * params.tentative_k as usize;
     let (mut qd, mut rd) = (vec![0f32; np * DESC_LEN], vec![0f32; np * DESC_LEN]);
     ssm::descriptors(&qp[..nq], &qt[..nq], params.desc_radius, &mut qd);
     ssm::descriptors(&rp[..nr], &rt[..nr], params.desc_radius, &mut rd);
-    let (mut tent, mut aff) = (vec![[0u16; 2]; nl], vec![ssm::Affinity::default(); refloc::localize::AFFINITY_CAP]);
+    let (mut tent, mut aff) = (
+        vec![[0u16; 2]; nl],
+        vec![ssm::Affinity::default(); refloc::localize::AFFINITY_CAP],
+    );
     let (mut x, mut y, mut order) = (vec![0f32; nl], vec![0f32; nl], vec![0u16; nl]);
     let (mut acc, mut flags) = (vec![[0u16; 2]; np], vec![0u8; 3 * np + nl]);
     let mut work = SsmWork {
@@ -519,7 +615,14 @@ pub fn ssm_trial<D: AsRef<[u8]>>(
         acc: &mut acc,
         flags: &mut flags,
     };
-    match ssm::match_scans(&qp[..nq], &qt[..nq], &rp[..nr], &rt[..nr], params, &mut work) {
+    match ssm::match_scans(
+        &qp[..nq],
+        &qt[..nq],
+        &rp[..nr],
+        &rt[..nr],
+        params,
+        &mut work,
+    ) {
         Some(m) => {
             let e = [
                 (m.pose.x - motion.x) as f64,
@@ -604,7 +707,11 @@ impl Default for Tolerance {
 }
 
 /// Compares summaries with a baseline's (matched by name).
-pub fn check(current: &[(String, Summary)], baseline: &[(String, Summary)], tol: &Tolerance) -> Vec<Regression> {
+pub fn check(
+    current: &[(String, Summary)],
+    baseline: &[(String, Summary)],
+    tol: &Tolerance,
+) -> Vec<Regression> {
     let mut out = Vec::new();
     for (name, b) in baseline {
         let Some((_, c)) = current.iter().find(|(n, _)| n == name) else {
@@ -626,7 +733,12 @@ pub fn check(current: &[(String, Summary)], baseline: &[(String, Summary)], tol:
                 });
             }
         };
-        lower("success_rate", b.success_rate, c.success_rate, b.success_rate - tol.rate);
+        lower(
+            "success_rate",
+            b.success_rate,
+            c.success_rate,
+            b.success_rate - tol.rate,
+        );
         let mut higher = |metric: &str, bv: f64, cv: f64, lim: f64| {
             if cv > lim {
                 out.push(Regression {
@@ -637,10 +749,30 @@ pub fn check(current: &[(String, Summary)], baseline: &[(String, Summary)], tol:
                 });
             }
         };
-        higher("false_accept_rate", b.false_accept_rate, c.false_accept_rate, b.false_accept_rate + tol.false_accept);
-        higher("mean_abs_x", b.mean_abs_x, c.mean_abs_x, b.mean_abs_x * tol.error_factor + tol.error_slack);
-        higher("mean_abs_y", b.mean_abs_y, c.mean_abs_y, b.mean_abs_y * tol.error_factor + tol.error_slack);
-        higher("mean_abs_theta", b.mean_abs_theta, c.mean_abs_theta, b.mean_abs_theta * tol.error_factor + tol.error_slack / 10.0);
+        higher(
+            "false_accept_rate",
+            b.false_accept_rate,
+            c.false_accept_rate,
+            b.false_accept_rate + tol.false_accept,
+        );
+        higher(
+            "mean_abs_x",
+            b.mean_abs_x,
+            c.mean_abs_x,
+            b.mean_abs_x * tol.error_factor + tol.error_slack,
+        );
+        higher(
+            "mean_abs_y",
+            b.mean_abs_y,
+            c.mean_abs_y,
+            b.mean_abs_y * tol.error_factor + tol.error_slack,
+        );
+        higher(
+            "mean_abs_theta",
+            b.mean_abs_theta,
+            c.mean_abs_theta,
+            b.mean_abs_theta * tol.error_factor + tol.error_slack / 10.0,
+        );
     }
     out
 }

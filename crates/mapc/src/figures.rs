@@ -45,7 +45,13 @@ pub fn db_canvas<D: AsRef<[u8]>>(db: &RefDb<D>, gray: &[u8]) -> MapCanvas {
 
 /// Fig. 10/15: the map with true (green) and estimated (red: accepted and
 /// wrong, blue: correct) poses; at most `max` trials drawn.
-pub fn poses_figure<D: AsRef<[u8]>>(db: &RefDb<D>, trials: &[Trial], title: &str, max: usize, path: &Path) -> io::Result<()> {
+pub fn poses_figure<D: AsRef<[u8]>>(
+    db: &RefDb<D>,
+    trials: &[Trial],
+    title: &str,
+    max: usize,
+    path: &Path,
+) -> io::Result<()> {
     let gray = db_gray(db);
     let mut c = db_canvas(db, &gray);
     for s in 0..db.site_count() {
@@ -91,31 +97,71 @@ pub fn error_figure(trials: &[Trial], title: &str, path: &Path) -> io::Result<()
             et.push(th.to_degrees());
         }
     }
-    let hi = ex.iter().chain(&ey).copied().fold(1.0f64, f64::max).min(300.0);
-    let mut c = Chart::new(title).x_label("|error| (mm; heading: deg x 10)").y_label("trials");
+    let hi = ex
+        .iter()
+        .chain(&ey)
+        .copied()
+        .fold(1.0f64, f64::max)
+        .min(300.0);
+    let mut c = Chart::new(title)
+        .x_label("|error| (mm; heading: deg x 10)")
+        .y_label("trials");
     let (e1, c1) = plot::histogram(&ex, 30, Some((0.0, hi)));
     let (_, c2) = plot::histogram(&ey, 30, Some((0.0, hi)));
-    let (_, c3) = plot::histogram(&et.iter().map(|v| v * 10.0).collect::<Vec<_>>(), 30, Some((0.0, hi)));
+    let (_, c3) = plot::histogram(
+        &et.iter().map(|v| v * 10.0).collect::<Vec<_>>(),
+        30,
+        Some((0.0, hi)),
+    );
     let xs: Vec<f64> = e1.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
-    c.line(&xs, &c1.iter().map(|&v| v as f64).collect::<Vec<_>>(), color::BLUE, "|x| (mm)");
-    c.line(&xs, &c2.iter().map(|&v| v as f64).collect::<Vec<_>>(), color::ORANGE, "|y| (mm)");
-    c.line(&xs, &c3.iter().map(|&v| v as f64).collect::<Vec<_>>(), color::GREEN, "|theta| (deg x 10)");
+    c.line(
+        &xs,
+        &c1.iter().map(|&v| v as f64).collect::<Vec<_>>(),
+        color::BLUE,
+        "|x| (mm)",
+    );
+    c.line(
+        &xs,
+        &c2.iter().map(|&v| v as f64).collect::<Vec<_>>(),
+        color::ORANGE,
+        "|y| (mm)",
+    );
+    c.line(
+        &xs,
+        &c3.iter().map(|&v| v as f64).collect::<Vec<_>>(),
+        color::GREEN,
+        "|theta| (deg x 10)",
+    );
     c.save_png(path)
 }
 
 /// Fig. 16: histogram of the coarse rank of the correct site.
 pub fn rank_figure(trials: &[Trial], title: &str, path: &Path) -> io::Result<()> {
-    let ranks: Vec<f64> = trials.iter().filter_map(|t| t.correct_rank.map(|r| r as f64 + 1.0)).collect();
+    let ranks: Vec<f64> = trials
+        .iter()
+        .filter_map(|t| t.correct_rank.map(|r| r as f64 + 1.0))
+        .collect();
     let top = ranks.iter().copied().fold(10.0f64, f64::max).min(60.0);
     let (edges, counts) = plot::histogram(&ranks, top as usize, Some((0.5, top + 0.5)));
-    let mut c = Chart::new(title).x_label("coarse rank of the correct site (1 = best)").y_label("queries");
+    let mut c = Chart::new(title)
+        .x_label("coarse rank of the correct site (1 = best)")
+        .y_label("queries");
     c.hist(&edges, &counts, color::BLUE, "");
     c.save_png(path)
 }
 
 /// Fig. 6: matching rate curves.
-pub fn curve_figure(xs: &[f64], ys: &[f64], title: &str, xlabel: &str, path: &Path) -> io::Result<()> {
-    let mut c = Chart::new(title).x_label(xlabel).y_label("matching rate").y_range(0.0, 1.05);
+pub fn curve_figure(
+    xs: &[f64],
+    ys: &[f64],
+    title: &str,
+    xlabel: &str,
+    path: &Path,
+) -> io::Result<()> {
+    let mut c = Chart::new(title)
+        .x_label(xlabel)
+        .y_label("matching rate")
+        .y_range(0.0, 1.05);
     c.line(xs, ys, color::BLUE, "SSM");
     c.save_png(path)
 }

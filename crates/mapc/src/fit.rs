@@ -92,12 +92,34 @@ pub fn fit_weights(
         let heading = rng.range(-std::f64::consts::PI, std::f64::consts::PI) as f32;
         let sensor = Pose2::new(pos[0], pos[1], heading);
         let mut ranges = sim::virtual_scan(grid, frame, &sensor, &ref_lidar);
-        sim::add_noise(&mut ranges, &ref_lidar, &Noise { range_sigma: 0.01, short_outliers: 20 }, &mut rng);
+        sim::add_noise(
+            &mut ranges,
+            &ref_lidar,
+            &Noise {
+                range_sigma: 0.01,
+                short_outliers: 20,
+            },
+            &mut rng,
+        );
         let mut dense = vec![[0f32; 2]; ranges.len()];
-        let n = prep::ranges_to_points(&ranges, s.angle_min, s.angle_increment, s.range_min, s.range_max, &mut dense);
+        let n = prep::ranges_to_points(
+            &ranges,
+            s.angle_min,
+            s.angle_increment,
+            s.range_min,
+            s.range_max,
+            &mut dense,
+        );
         let nq = prep::prepare(&dense[..n], true, params, &mut qp, &mut qt);
         let mut rdense = vec![[0f32; 2]; site_scans[si].len()];
-        let m = prep::ranges_to_points(&site_scans[si], s.angle_min, s.angle_increment, s.range_min, s.range_max, &mut rdense);
+        let m = prep::ranges_to_points(
+            &site_scans[si],
+            s.angle_min,
+            s.angle_increment,
+            s.range_min,
+            s.range_max,
+            &mut rdense,
+        );
         let nr = prep::prepare(&rdense[..m], true, params, &mut rp, &mut rt);
         if nq < 8 || nr < 8 {
             continue;
@@ -119,7 +141,9 @@ pub fn fit_weights(
         // Every positive pair, and a deterministic subsample of the negatives.
         for a in 0..nl {
             for b in (a + 1)..nl {
-                let Some((drho, dth2)) = ssm::pair_deformation(&qp, &qt, &rp, &rt, tent[a], tent[b], params.max_rho_dev) else {
+                let Some((drho, dth2)) =
+                    ssm::pair_deformation(&qp, &qt, &rp, &rt, tent[a], tent[b], params.max_rho_dev)
+                else {
                     continue;
                 };
                 let pos = correct[a] && correct[b];
@@ -188,7 +212,8 @@ pub fn logistic_irls(xs: &[[f32; 2]], ys: &[f32], neg_weight: f64) -> [f32; 3] {
 
 fn solve3(h: &[[f64; 3]; 3], g: &[f64; 3]) -> Option<[f64; 3]> {
     let det = |m: &[[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
             + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
     };
     let d = det(h);

@@ -47,6 +47,19 @@ pub struct BuildConfig {
     pub selection: String,
     /// Pose refinement iterations against the map (0: off, as the paper).
     pub refine_iters: u32,
+    /// SSM tentative correspondences per input point.
+    pub tentative_k: u32,
+    /// Most resampled points per scan.
+    pub max_points: u32,
+    /// Early-stop ratio of the candidate loop (0: examine all).
+    pub early_accept: f32,
+    /// Widths (degrees) of the window histograms stored for partial fields
+    /// of view, at most two, ascending; empty stores none.
+    pub fov_windows_deg: Vec<f32>,
+    /// Stop after this many candidates once one passes the acceptance threshold.
+    pub early_min: u32,
+    /// Ambiguity rejection ratio (0: off).
+    pub ambiguity_ratio: f32,
 }
 
 impl Default for BuildConfig {
@@ -65,6 +78,12 @@ impl Default for BuildConfig {
             accept_ratio: 0.5,
             selection: "vicinity".into(),
             refine_iters: Params::defaults(362, 30.0).refine_iters,
+            tentative_k: Params::defaults(362, 30.0).tentative_k,
+            max_points: Params::defaults(362, 30.0).max_points,
+            early_accept: Params::defaults(362, 30.0).early_accept,
+            fov_windows_deg: vec![180.0, 270.0],
+            early_min: Params::defaults(362, 30.0).early_min,
+            ambiguity_ratio: Params::defaults(362, 30.0).ambiguity_ratio,
         }
     }
 }
@@ -73,15 +92,35 @@ impl BuildConfig {
     /// Runtime parameters for this configuration (before the fit).
     pub fn params(&self) -> Result<Params, String> {
         let mut p = Params::defaults(self.beams, self.range_max);
-        p.sensor.offset = Pose2::new(self.sensor_offset[0], self.sensor_offset[1], self.sensor_offset[2]);
+        p.sensor.offset = Pose2::new(
+            self.sensor_offset[0],
+            self.sensor_offset[1],
+            self.sensor_offset[2],
+        );
         p.nc_max = self.nc_max;
         p.nc_min = p.nc_min.min(self.nc_max);
         p.accept_ratio = self.accept_ratio;
         p.refine_iters = self.refine_iters;
+        p.tentative_k = self.tentative_k;
+        p.max_points = self.max_points;
+        p.early_accept = self.early_accept;
+        p.early_min = self.early_min;
+        p.ambiguity_ratio = self.ambiguity_ratio;
+        if self.fov_windows_deg.len() > 2 {
+            return Err("at most two --fov-windows widths".into());
+        }
+        p.win_widths = [0.0; 2];
+        for (slot, w) in p.win_widths.iter_mut().zip(&self.fov_windows_deg) {
+            *slot = w.to_radians();
+        }
         p.selection = match self.selection.as_str() {
             "vicinity" => Selection::Vicinity,
             "match-score" => Selection::MatchScore,
-            other => return Err(format!("unknown selection rule '{other}' (expected vicinity or match-score)")),
+            other => {
+                return Err(format!(
+                    "unknown selection rule '{other}' (expected vicinity or match-score)"
+                ))
+            }
         };
         p.validate().map_err(|f| format!("invalid option: {f}"))?;
         Ok(p)
@@ -150,7 +189,8 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> 
         ..SiteOptions::default()
     };
     let blocked = grid.blocked_bits(cfg.unknown_blocks);
-    let bitgrid = refloc::raycast::BitGrid::new(grid.width, grid.height, &blocked).ok_or("grid too large")?;
+    let bitgrid =
+        refloc::raycast::BitGrid::new(grid.width, grid.height, &blocked).ok_or("grid too large")?;
     let placed = sites::place_sites(grid, &df, &graph, &sopts);
     let coverage = sites::coverage(grid, &bitgrid, &df, &placed, 0.25, cfg.coverage_range);
     times.sites = t.elapsed().as_secs_f64();
@@ -201,7 +241,10 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> 
         "sites": placed.len(),
         "coverage": coverage.fraction,
     });
-    sections.push((SectionKind::Manifest, serde_json::to_vec_pretty(&manifest).map_err(|e| e.to_string())?));
+    sections.push((
+        SectionKind::Manifest,
+        serde_json::to_vec_pretty(&manifest).map_err(|e| e.to_string())?,
+    ));
     Ok(BuildOutput {
         sections,
         gvd: graph,

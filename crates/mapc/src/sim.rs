@@ -29,7 +29,11 @@ impl Lidar {
     pub fn new(beams: usize, fov: f32, range_max: f32) -> Lidar {
         let full = fov >= 2.0 * std::f32::consts::PI - 1e-4;
         let beams = beams.max(2);
-        let inc = if full { fov / beams as f32 } else { fov / (beams - 1) as f32 };
+        let inc = if full {
+            fov / beams as f32
+        } else {
+            fov / (beams - 1) as f32
+        };
         Lidar {
             beams,
             angle_min: -fov / 2.0,
@@ -56,7 +60,12 @@ pub struct Noise {
 
 /// Exact virtual ranges (m; `INFINITY` for no return) of `lidar` at sensor
 /// pose `sensor` (map frame).
-pub fn virtual_scan(grid: &BitGrid<'_>, frame: &MapFrame, sensor: &Pose2, lidar: &Lidar) -> Vec<f32> {
+pub fn virtual_scan(
+    grid: &BitGrid<'_>,
+    frame: &MapFrame,
+    sensor: &Pose2,
+    lidar: &Lidar,
+) -> Vec<f32> {
     let uv = frame.to_cells([sensor.x, sensor.y]);
     let max_cells = lidar.range_max / frame.resolution;
     (0..lidar.beams)
@@ -74,7 +83,8 @@ pub fn virtual_scan(grid: &BitGrid<'_>, frame: &MapFrame, sensor: &Pose2, lidar:
 pub fn add_noise(ranges: &mut [f32], lidar: &Lidar, noise: &Noise, rng: &mut Rng) {
     for r in ranges.iter_mut() {
         if r.is_finite() && noise.range_sigma > 0.0 {
-            *r = (*r + noise.range_sigma * rng.normal() as f32).clamp(lidar.range_min.max(1e-3), lidar.range_max);
+            *r = (*r + noise.range_sigma * rng.normal() as f32)
+                .clamp(lidar.range_min.max(1e-3), lidar.range_max);
         }
     }
     if ranges.is_empty() {
@@ -82,7 +92,11 @@ pub fn add_noise(ranges: &mut [f32], lidar: &Lidar, noise: &Noise, rng: &mut Rng
     }
     for _ in 0..noise.short_outliers {
         let k = rng.below(ranges.len() as u64) as usize;
-        let cur = if ranges[k].is_finite() { ranges[k] } else { lidar.range_max };
+        let cur = if ranges[k].is_finite() {
+            ranges[k]
+        } else {
+            lidar.range_max
+        };
         ranges[k] = rng.range(0.1, cur.max(0.2) as f64) as f32;
     }
 }

@@ -4,6 +4,13 @@
 //! N_C rule (see `docs/ssm.md` for the measurements behind it): the sites are
 //! ranked by gamma; every site whose gamma is within `nc_margin` of the best
 //! is a candidate, with at least `nc_min` and at most `nc_max` candidates.
+//!
+//! Partial fields of view (see `docs/ssm.md`): a 180-degree scan's
+//! histogram does not resemble a full circle's. The database stores, per
+//! site, histograms of windows of its reference scan (widths `win_widths`,
+//! `win_headings` headings each). A query narrower than a full turn is
+//! cropped to the central part matching the widest stored width it covers,
+//! and a site's score is its best correlation over that width's headings.
 
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
@@ -28,6 +35,12 @@ pub fn correlation(h: &[f32], g: &[f32]) -> f32 {
         num += a * b;
         dh += a * a;
         dg += b * b;
+    }
+    // A flat histogram has zero variance; rounding leaves a tiny residue that
+    // must not be read as signal.
+    let eps = 1e-9 * (sh * sh + sg * sg) / k as f32 + f32::MIN_POSITIVE;
+    if dh <= eps || dg <= eps {
+        return 0.0;
     }
     let den = libm::sqrtf(dh * dg);
     let r = num / den;
@@ -55,10 +68,14 @@ pub fn rank_top<'h>(
     sites: impl Iterator<Item = &'h [f32]>,
     top: &mut [Ranked],
 ) -> usize {
+    rank_top_scores(sites.map(|h| correlation(input, h)), top)
+}
+
+/// As [`rank_top`], from each site's score (site index = position).
+pub fn rank_top_scores(scores: impl Iterator<Item = f32>, top: &mut [Ranked]) -> usize {
     let cap = top.len();
     let mut n = 0;
-    for (s, h) in sites.enumerate() {
-        let g = correlation(input, h);
+    for (s, g) in scores.enumerate() {
         let better = |a: f32, ai: u32, b: &Ranked| a > b.gamma || (a == b.gamma && ai < b.site);
         if n < cap || (cap > 0 && better(g, s as u32, &top[cap - 1])) {
             let mut pos = n.min(cap.saturating_sub(1));
@@ -88,4 +105,96 @@ pub fn candidate_count(ranked: &[Ranked], nc_min: usize, nc_max: usize, margin: 
         .take_while(|r| r.gamma >= best.gamma - margin)
         .count();
     within.clamp(nc_min, nc_max).min(ranked.len())
+}
+
+/// The stored window width a query covering `fov` radians is compared with:
+/// `None` for a (nearly) full turn or a database without windows (then the
+/// full histograms are used), else the index of the widest stored width not
+/// larger than `fov` (the narrowest one when `fov` is narrower than all).
+pub fn window_for(params: &crate::Params, fov: f32) -> Option<usize> {
+    let n = params.win_count();
+    if n == 0 || !(fov < 2.0 * core::f32::consts::PI * 0.97) {
+        return None;
+    }
+    let mut pick = 0;
+    for (i, w) in params.win_widths[..n].iter().enumerate() {
+        if *w <= fov + 0.05 {
+            pick = i;
+        }
+    }
+    Some(pick)
+}
+
+/// Index range `[a, b)` of the central `width` radians of `n` evenly spaced
+/// beams covering `fov` radians (the whole range when `width >= fov`).
+pub fn crop_range(n: usize, fov: f32, width: f32) -> (usize, usize) {
+    if !(fov > 0.0) || width >= fov || n == 0 {
+        return (0, n);
+    }
+    let keep = ((n as f32) * width / fov) as usize;
+    let keep = keep.clamp(1, n);
+    let a = (n - keep) / 2;
+    (a, a + keep)
+}
+
+/// Computes the coarse histogram of a query: `dense` are its beam-ordered
+/// sensor-frame points (counter-clockwise), `fov` its coverage (rad), `wrap`
+/// whether it is a closed full turn. `pts`/`tan` are working buffers (at
+/// least `max_points` long); `out` receives the histogram (at least
+/// `max(hist_cells, win_cells)` long). Returns the window used (see
+/// [`window_for`]) and the number of histogram cells written.
+pub fn query_histogram(
+    dense: &[[f32; 2]],
+    fov: f32,
+    wrap: bool,
+    params: &crate::Params,
+    pts: &mut [[f32; 2]],
+    tan: &mut [[f32; 2]],
+    out: &mut [f32],
+) -> (Option<usize>, usize) {
+    match window_for(params, fov) {
+        None => {
+            let n = crate::prep::prepare(dense, wrap, params, pts, tan);
+            crate::pgr::histogram(&pts[..n], &tan[..n], params, out);
+            (None, params.hist_cells())
+        }
+        Some(w) => {
+            let (a, b) = crop_range(dense.len(), fov, params.win_widths[w]);
+            let n = crate::prep::prepare(&dense[a..b], false, params, pts, tan);
+            let k = params.win_cells();
+            crate::pgr::histogram_binned(
+                &pts[..n],
+                &tan[..n],
+                params.win_rho_bins as usize,
+                params.win_theta_bins as usize,
+                params.hist_rho_max,
+                out,
+            );
+            (Some(w), k)
+        }
+    }
+}
+
+/// A site's coarse score for a query histogram computed by
+/// [`query_histogram`] with `window`: the correlation with the site's full
+/// histogram, or its best correlation over the window's headings.
+pub fn site_score<D: AsRef<[u8]>>(
+    db: &crate::RefDb<D>,
+    hist: &[f32],
+    window: Option<usize>,
+    site: usize,
+) -> f32 {
+    match window {
+        None => correlation(hist, db.hist(site)),
+        Some(w) => {
+            let mut best = -1.0f32;
+            for h in 0..db.params().win_headings as usize {
+                let g = correlation(hist, db.window_hist(site, w, h));
+                if g > best {
+                    best = g;
+                }
+            }
+            best
+        }
+    }
 }

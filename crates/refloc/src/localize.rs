@@ -178,8 +178,11 @@ pub struct Localization<'s> {
     pub vicinity: f32,
     /// Its acceptance threshold.
     pub vicinity_threshold: f32,
-    /// M > threshold.
+    /// M > threshold and not ambiguous.
     pub accepted: bool,
+    /// Another candidate with a clearly different pose scored within
+    /// `ambiguity_ratio` of the best (the pose is then not accepted).
+    pub ambiguous: bool,
     /// Valid input points.
     pub valid_points: u32,
     /// Every candidate examined, in coarse rank order.
@@ -204,7 +207,7 @@ impl Dims {
             beams: max_beams,
             ref_beams: params.sensor.beams as usize,
             points,
-            hist: params.hist_cells(),
+            hist: params.hist_cells().max(params.win_cells()),
             cands: params.nc_max as usize,
             tent: points * params.tentative_k as usize,
         }
@@ -291,6 +294,10 @@ impl<'a> Arena<'a> {
 /// Localizes `scan` against `db` with no initial pose, using only `scratch`
 /// (at least [`scratch_size`]`(db.params(), scan.len())` bytes). Never
 /// allocates and never panics.
+///
+/// A scratch too small for this scan gives [`LocalizeError::TooManyBeams`]
+/// (with the beam count it can take) when it can take some scan, else
+/// [`LocalizeError::ScratchTooSmall`].
 pub fn localize<'s, D: AsRef<[u8]>>(
     db: &RefDb<D>,
     scan: &Scan<'_>,
@@ -347,7 +354,7 @@ pub fn localize<'s, D: AsRef<[u8]>>(
     };
 
     // 1. Input scan to beam-ordered points, counter-clockwise.
-    let (valid, wrap, range_max) = load_scan(scan, in_pts, in_ang, in_rng)?;
+    let (valid, fov, wrap, range_max) = load_scan(scan, in_pts, in_ang, in_rng)?;
     let needed_pts = params.min_valid_points as usize;
     if valid < needed_pts {
         return Err(LocalizeError::NotEnoughPoints {
@@ -365,9 +372,14 @@ pub fn localize<'s, D: AsRef<[u8]>>(
     }
     let (q_pts, q_tan) = (&q_pts[..nq], &q_tan[..nq]);
 
-    // 2. Coarse: histogram and ranking.
-    crate::pgr::histogram(q_pts, q_tan, params, hist);
-    let ranked = coarse::rank_top(hist, (0..db.site_count()).map(|s| db.hist(s)), top);
+    // 2. Coarse: histogram (of a window matching a partial field of view)
+    //    and ranking. The reference buffers are free until the fine stage.
+    let (window, cells) = coarse::query_histogram(in_pts, fov, wrap, params, r_pts, r_tan, hist);
+    let hist = &hist[..cells];
+    let ranked = coarse::rank_top_scores(
+        (0..db.site_count()).map(|s| coarse::site_score(db, hist, window, s)),
+        top,
+    );
     let nc = coarse::candidate_count(
         &top[..ranked],
         params.nc_min as usize,
@@ -457,9 +469,23 @@ pub fn localize<'s, D: AsRef<[u8]>>(
             if better {
                 best = Some(c);
             }
+            // Early stop (vicinity selection): a confident match, or enough
+            // candidates examined and an acceptable best.
+            let best_m = best
+                .map(|b| {
+                    if b == c {
+                        cand.vicinity
+                    } else {
+                        cands[b].vicinity
+                    }
+                })
+                .unwrap_or(0.0);
             let done = params.selection == Selection::Vicinity
                 && params.early_accept > 0.0
-                && v.score >= 4.5 * v.pairs as f32 * params.early_accept;
+                && (best_m >= 4.5 * v.pairs as f32 * params.early_accept
+                    || (params.early_min > 0
+                        && c + 1 >= params.early_min as usize
+                        && best_m > v.threshold));
             cands[c] = cand;
             if done {
                 examined = c + 1;
@@ -473,6 +499,14 @@ pub fn localize<'s, D: AsRef<[u8]>>(
     let b = best.ok_or(LocalizeError::NoMatch { candidates: nc })?;
     let c = cands[b];
     let pose = Pose2::new(c.x, c.y, c.theta);
+    // Ambiguity: another examined candidate far from this pose that explains
+    // the scan almost as well.
+    let ambiguous = params.ambiguity_ratio > 0.0
+        && cands.iter().any(|o| {
+            let far = (o.x - c.x) * (o.x - c.x) + (o.y - c.y) * (o.y - c.y) > 1.0
+                || libm::fabsf(crate::wrap_angle(o.theta - c.theta)) > 0.349_066; // 20 degrees
+            o.has_pose != 0 && far && o.vicinity >= params.ambiguity_ratio * c.vicinity
+        });
     Ok(Localization {
         pose,
         sensor_pose: pose.compose(&s.offset),
@@ -483,20 +517,21 @@ pub fn localize<'s, D: AsRef<[u8]>>(
         inliers: c.inliers,
         vicinity: c.vicinity,
         vicinity_threshold: c.vicinity_threshold,
-        accepted: c.vicinity > c.vicinity_threshold,
+        accepted: c.vicinity > c.vicinity_threshold && !ambiguous,
+        ambiguous,
         valid_points: valid as u32,
         candidates: cands,
     })
 }
 
 /// Fills dense points, beam angles and ranges in counter-clockwise order.
-/// Returns (valid count, covers the full circle, range_max).
+/// Returns (valid count, angular coverage in rad, closes a full turn, range_max).
 fn load_scan(
     scan: &Scan<'_>,
     pts: &mut [[f32; 2]],
     ang: &mut [f32],
     rng: &mut [f32],
-) -> Result<(usize, bool, f32), LocalizeError> {
+) -> Result<(usize, f32, bool, f32), LocalizeError> {
     use core::f32::consts::PI;
     let n = scan.len();
     if n > pts.len() || n > ang.len() || n > rng.len() {
@@ -544,8 +579,9 @@ fn load_scan(
                     pts[k] = [f32::NAN, f32::NAN];
                 }
             }
+            let fov = (libm::fabsf(inc) * n as f32).min(2.0 * PI);
             let wrap = libm::fabsf(inc) * n as f32 >= 2.0 * PI - 1.5 * libm::fabsf(inc);
-            Ok((valid, wrap, r.range_max))
+            Ok((valid, fov, wrap, r.range_max))
         }
         Scan::Points { points, range_max } => {
             if !(range_max.is_finite() && *range_max > 0.0) {
@@ -590,7 +626,7 @@ fn load_scan(
                     rng[k] = f32::INFINITY;
                 }
             }
-            Ok((valid, turn > 2.0 * PI * 0.9, *range_max))
+            Ok((valid, turn.min(2.0 * PI), turn > 2.0 * PI * 0.9, *range_max))
         }
     }
 }

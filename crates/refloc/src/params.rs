@@ -98,6 +98,19 @@ pub struct Params {
     pub selection: Selection,
     /// Early stop ratio for vicinity selection (0: examine every candidate).
     pub early_accept: f32,
+    /// Widths (rad) of the stored window histograms for partial fields of
+    /// view; 0 marks an unused slot.
+    pub win_widths: [f32; 2],
+    /// Headings per window width, evenly spaced from 0.
+    pub win_headings: u32,
+    /// Window histogram rho bins.
+    pub win_rho_bins: u32,
+    /// Window histogram theta bins.
+    pub win_theta_bins: u32,
+    /// Stop after this many candidates once one passes the acceptance threshold (0: never).
+    pub early_min: u32,
+    /// Ambiguity rejection ratio (0: off).
+    pub ambiguity_ratio: f32,
 }
 
 impl Params {
@@ -124,7 +137,7 @@ impl Params {
             nc_max: 80,
             nc_margin: 0.25,
             desc_radius: 2.0,
-            tentative_k: 4,
+            tentative_k: 2,
             max_rho_dev: 0.3,
             w: [4.0, -100.0, -20.0],
             power_iters: 30,
@@ -139,13 +152,29 @@ impl Params {
             accept_ratio: 0.5,
             min_valid_points: 20,
             selection: Selection::Vicinity,
-            early_accept: 0.7,
+            early_accept: 0.9,
+            win_widths: [core::f32::consts::PI, 1.5 * core::f32::consts::PI],
+            win_headings: 8,
+            win_rho_bins: 16,
+            win_theta_bins: 12,
+            early_min: 0,
+            ambiguity_ratio: 0.97,
         }
     }
 
     /// Number of cells of a PGR histogram.
     pub fn hist_cells(&self) -> usize {
         self.hist_rho_bins as usize * self.hist_theta_bins as usize
+    }
+
+    /// Cells of a window histogram.
+    pub fn win_cells(&self) -> usize {
+        self.win_rho_bins as usize * self.win_theta_bins as usize
+    }
+
+    /// Number of used window widths (the used slots come first).
+    pub fn win_count(&self) -> usize {
+        self.win_widths.iter().take_while(|w| **w > 0.0).count()
     }
 
     /// Checks ranges; returns the name of the first bad field.
@@ -179,7 +208,7 @@ impl Params {
         }
         if self.hist_rho_bins == 0
             || self.hist_theta_bins == 0
-            || self.hist_rho_bins * self.hist_theta_bins > MAX_HIST_CELLS
+            || self.hist_rho_bins as u64 * self.hist_theta_bins as u64 > MAX_HIST_CELLS as u64
         {
             return Err("histogram bins");
         }
@@ -227,6 +256,31 @@ impl Params {
         }
         if !(self.accept_ratio >= 0.0 && self.accept_ratio <= 1.0) {
             return Err("accept_ratio");
+        }
+        let two_pi = 2.0 * core::f32::consts::PI;
+        if !self
+            .win_widths
+            .iter()
+            .all(|w| *w == 0.0 || (w.is_finite() && *w > 0.0 && *w < two_pi))
+        {
+            return Err("win_widths");
+        }
+        if self.win_widths[0] == 0.0 && self.win_widths[1] != 0.0
+            || (self.win_count() == 2 && self.win_widths[1] <= self.win_widths[0])
+        {
+            return Err("win_widths order");
+        }
+        if self.win_count() > 0
+            && (self.win_headings == 0
+                || self.win_headings > 64
+                || self.win_rho_bins == 0
+                || self.win_theta_bins == 0
+                || self.win_rho_bins as u64 * self.win_theta_bins as u64 > MAX_HIST_CELLS as u64)
+        {
+            return Err("window histogram layout");
+        }
+        if !(self.ambiguity_ratio >= 0.0 && self.ambiguity_ratio <= 1.0) {
+            return Err("ambiguity_ratio");
         }
         if !(self.early_accept >= 0.0 && self.early_accept <= 1.0) {
             return Err("early_accept");
@@ -282,6 +336,12 @@ impl Params {
                 _ => return Err("selection"),
             },
             early_accept: r.early_accept.get(),
+            win_widths: [r.win_widths[0].get(), r.win_widths[1].get()],
+            win_headings: r.win_headings.get(),
+            win_rho_bins: r.win_rho_bins.get(),
+            win_theta_bins: r.win_theta_bins.get(),
+            early_min: r.early_min.get(),
+            ambiguity_ratio: r.ambiguity_ratio.get(),
         })
     }
 
@@ -330,7 +390,13 @@ impl Params {
                 Selection::Vicinity => 1,
             }),
             early_accept: F32::new(self.early_accept),
-            reserved: [U32::new(0); 13],
+            win_widths: [F32::new(self.win_widths[0]), F32::new(self.win_widths[1])],
+            win_headings: U32::new(self.win_headings),
+            win_rho_bins: U32::new(self.win_rho_bins),
+            win_theta_bins: U32::new(self.win_theta_bins),
+            early_min: U32::new(self.early_min),
+            ambiguity_ratio: F32::new(self.ambiguity_ratio),
+            reserved: [U32::new(0); 6],
         }
     }
 }

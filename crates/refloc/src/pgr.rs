@@ -8,7 +8,8 @@
 //! motion and keeps that information.
 //!
 //! Binning: `hist_rho_bins` equal bins over [0, `hist_rho_max`) (longer pairs
-//! go in the last bin) times `hist_theta_bins` equal bins over [-pi, pi);
+//! go in the last bin) times `hist_theta_bins` equal bins around the circle,
+//! centred on -pi (= pi) and 0 (see [`cell`]);
 //! cell index `rho_bin * theta_bins + theta_bin`. Every ordered pair votes 1;
 //! the histogram is then normalized to sum 1, so scans with different point
 //! counts compare directly.
@@ -23,13 +24,22 @@ pub fn pgr(pi: [f32; 2], ui: [f32; 2], pj: [f32; 2]) -> (f32, f32) {
     (norm(d), signed_angle(ui, d))
 }
 
-/// Histogram cell of `(rho, theta)`.
+/// Histogram cell of `(rho, theta)`. Theta bins are centred on 0 and pi
+/// (bin `b` covers `[-pi + (b - 1/2) w, -pi + (b + 1/2) w)` modulo 2 pi,
+/// `w = 2 pi / theta_bins`): pairs along one straight surface have theta
+/// exactly 0 or pi and must not sit on a bin edge, where rounding would
+/// scatter them between two bins.
 #[inline]
 pub fn cell(rho: f32, theta: f32, rho_bins: usize, theta_bins: usize, rho_max: f32) -> usize {
     use core::f32::consts::PI;
     let rb = ((rho / rho_max) * rho_bins as f32) as usize;
     let rb = rb.min(rho_bins - 1);
-    let tb = (((theta + PI) / (2.0 * PI)) * theta_bins as f32) as usize;
+    let half = PI / theta_bins as f32;
+    let mut t = theta + PI + half;
+    if t >= 2.0 * PI {
+        t -= 2.0 * PI;
+    }
+    let tb = ((t / (2.0 * PI)) * theta_bins as f32) as usize;
     let tb = tb.min(theta_bins - 1);
     rb * theta_bins + tb
 }
@@ -38,8 +48,27 @@ pub fn cell(rho: f32, theta: f32, rho_bins: usize, theta_bins: usize, rho_max: f
 /// geometric histogram of prepared points `pts` with tangents `tan`.
 /// Returns the number of ordered pairs that voted.
 pub fn histogram(pts: &[[f32; 2]], tan: &[[f32; 2]], params: &Params, out: &mut [f32]) -> usize {
-    let rb = params.hist_rho_bins as usize;
-    let tb = params.hist_theta_bins as usize;
+    histogram_binned(
+        pts,
+        tan,
+        params.hist_rho_bins as usize,
+        params.hist_theta_bins as usize,
+        params.hist_rho_max,
+        out,
+    )
+}
+
+/// As [`histogram`] with explicit binning: `rho_bins` over [0, `rho_max`)
+/// (m) times `theta_bins` over [-pi, pi). Fills `out[..rho_bins * theta_bins]`.
+pub fn histogram_binned(
+    pts: &[[f32; 2]],
+    tan: &[[f32; 2]],
+    rho_bins: usize,
+    theta_bins: usize,
+    rho_max: f32,
+    out: &mut [f32],
+) -> usize {
+    let (rb, tb) = (rho_bins, theta_bins);
     let k = rb * tb;
     for v in out.iter_mut() {
         *v = 0.0;
@@ -58,8 +87,8 @@ pub fn histogram(pts: &[[f32; 2]], tan: &[[f32; 2]], params: &Params, out: &mut 
             }
             let t_ij = signed_angle(tan[i], d);
             let t_ji = signed_angle(tan[j], [-d[0], -d[1]]);
-            out[cell(rho, t_ij, rb, tb, params.hist_rho_max)] += 1.0;
-            out[cell(rho, t_ji, rb, tb, params.hist_rho_max)] += 1.0;
+            out[cell(rho, t_ij, rb, tb, rho_max)] += 1.0;
+            out[cell(rho, t_ji, rb, tb, rho_max)] += 1.0;
             votes += 2;
         }
     }

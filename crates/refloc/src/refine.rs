@@ -4,7 +4,7 @@
 //! interpolation. Points farther than `refine_max_dist` from any surface are
 //! left out (clutter, people, unmapped objects).
 
-use crate::format::DIST_STEPS_PER_CELL;
+use crate::format::dist_cells;
 use crate::{MapFrame, Pose2};
 
 /// The quantized distance map.
@@ -14,7 +14,7 @@ pub struct DistMap<'a> {
     pub width: u32,
     /// Rows.
     pub height: u32,
-    /// One byte per cell: distance in `resolution / DIST_STEPS_PER_CELL`.
+    /// One byte per cell: signed distance, see [`crate::format::dist_cells`].
     pub data: &'a [u8],
     /// Grid placement.
     pub frame: MapFrame,
@@ -24,10 +24,10 @@ impl DistMap<'_> {
     #[inline]
     fn at(&self, cx: i64, cy: i64) -> f32 {
         if cx < 0 || cy < 0 || cx >= self.width as i64 || cy >= self.height as i64 {
-            return 255.0;
+            return dist_cells(255);
         }
         let i = cy as usize * self.width as usize + cx as usize;
-        self.data.get(i).copied().unwrap_or(255) as f32
+        dist_cells(self.data.get(i).copied().unwrap_or(255))
     }
 
     /// Distance (m) to the nearest surface at map point `p` and its gradient
@@ -50,7 +50,7 @@ impl DistMap<'_> {
         let d10 = self.at(x0 + 1, y0);
         let d01 = self.at(x0, y0 + 1);
         let d11 = self.at(x0 + 1, y0 + 1);
-        let unit = self.frame.resolution / DIST_STEPS_PER_CELL;
+        let unit = self.frame.resolution;
         let d = (d00 * (1.0 - fx) * (1.0 - fy)
             + d10 * fx * (1.0 - fy)
             + d01 * (1.0 - fx) * fy
@@ -67,9 +67,37 @@ impl DistMap<'_> {
     }
 }
 
+/// Scale of the robust (Cauchy) weight, metres: a point this far from a
+/// surface counts half as much as one on it.
+const ROBUST_SCALE: f32 = 0.05;
+
+/// Robust cost of `pose`: sum over points of `c^2/2 * ln(1 + (d/c)^2)`.
+fn cost(dm: &DistMap<'_>, pts: &[[f32; 2]], pose: &Pose2, max_dist: f32) -> (f32, u32) {
+    let (s, c) = (libm::sinf(pose.theta), libm::cosf(pose.theta));
+    let c2 = ROBUST_SCALE * ROBUST_SCALE;
+    let mut total = 0.0f32;
+    let mut n = 0;
+    for p in pts {
+        if !p[0].is_finite() {
+            continue;
+        }
+        let m = [pose.x + c * p[0] - s * p[1], pose.y + s * p[0] + c * p[1]];
+        let d = match dm.sample(m) {
+            Some((d, _)) if d < max_dist => d,
+            _ => max_dist,
+        };
+        total += 0.5 * c2 * libm::logf(1.0 + d * d / c2);
+        n += 1;
+    }
+    (total, n)
+}
+
 /// Refines the sensor pose `pose` (map frame) so the sensor-frame points
-/// `pts` (non-finite entries skipped) fall on the map's surfaces.
-/// Returns the refined pose and the number of points used in the last step.
+/// `pts` (non-finite entries skipped) fall on the map's surfaces: iteratively
+/// reweighted Gauss-Newton with Cauchy weights, a step accepted only when it
+/// lowers the robust cost (else halved, up to four times). Points farther
+/// than `max_dist` from any surface are ignored. Returns the refined pose and
+/// the number of points that carried weight in the last step.
 pub fn refine(
     dm: &DistMap<'_>,
     pts: &[[f32; 2]],
@@ -79,6 +107,8 @@ pub fn refine(
 ) -> (Pose2, u32) {
     let mut pose = pose;
     let mut used = 0;
+    let c2 = ROBUST_SCALE * ROBUST_SCALE;
+    let mut current = cost(dm, pts, &pose, max_dist).0;
     for _ in 0..iters {
         let (s, c) = (libm::sinf(pose.theta), libm::cosf(pose.theta));
         let mut h = [[0.0f32; 3]; 3];
@@ -95,12 +125,13 @@ pub fn refine(
             if !(d < max_dist) {
                 continue;
             }
+            let wgt = 1.0 / (1.0 + d * d / c2);
             let dth = grad[0] * (-s * p[0] - c * p[1]) + grad[1] * (c * p[0] - s * p[1]);
             let j = [grad[0], grad[1], dth];
             for a in 0..3 {
-                g[a] += j[a] * d;
+                g[a] += wgt * j[a] * d;
                 for b in 0..3 {
-                    h[a][b] += j[a] * j[b];
+                    h[a][b] += wgt * j[a] * j[b];
                 }
             }
             used += 1;
@@ -113,25 +144,30 @@ pub fn refine(
             row[a] += 1e-3 * (1.0 + row[a]);
         }
         let Some(step) = solve3(&h, &g) else { break };
-        let step = [-step[0], -step[1], -step[2]];
         // Bound each step: refinement corrects small errors, it does not search.
-        let lim = 0.1;
-        let sc = {
-            let m = libm::fabsf(step[0])
-                .max(libm::fabsf(step[1]))
-                .max(libm::fabsf(step[2]) * 2.0);
-            if m > lim {
-                lim / m
-            } else {
-                1.0
+        let m = libm::fabsf(step[0])
+            .max(libm::fabsf(step[1]))
+            .max(libm::fabsf(step[2]) * 2.0);
+        let mut scale = if m > 0.1 { 0.1 / m } else { 1.0 };
+        let mut moved = false;
+        for _ in 0..5 {
+            let cand = Pose2::new(
+                pose.x - scale * step[0],
+                pose.y - scale * step[1],
+                pose.theta - scale * step[2],
+            );
+            let next = cost(dm, pts, &cand, max_dist).0;
+            if next < current {
+                pose = cand;
+                current = next;
+                moved = true;
+                break;
             }
-        };
-        pose = Pose2::new(
-            pose.x + sc * step[0],
-            pose.y + sc * step[1],
-            pose.theta + sc * step[2],
-        );
-        if libm::fabsf(step[0]) + libm::fabsf(step[1]) + libm::fabsf(step[2]) < 1e-5 {
+            scale *= 0.5;
+        }
+        if !moved
+            || scale * (libm::fabsf(step[0]) + libm::fabsf(step[1]) + libm::fabsf(step[2])) < 1e-5
+        {
             break;
         }
     }

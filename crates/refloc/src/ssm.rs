@@ -329,7 +329,12 @@ pub fn pair_deformation(
         return None;
     }
     let (i, ii, j, jj) = (i as usize, ii as usize, j as usize, jj as usize);
-    let (pi, ri, pj, rj) = (*q_pts.get(i)?, *r_pts.get(ii)?, *q_pts.get(j)?, *r_pts.get(jj)?);
+    let (pi, ri, pj, rj) = (
+        *q_pts.get(i)?,
+        *r_pts.get(ii)?,
+        *q_pts.get(j)?,
+        *r_pts.get(jj)?,
+    );
     let dq = [pj[0] - pi[0], pj[1] - pi[1]];
     let dr = [rj[0] - ri[0], rj[1] - ri[1]];
     let (lq, lr) = (norm(dq), norm(dr));
@@ -340,8 +345,14 @@ pub fn pair_deformation(
     // cos of the angle difference at i (tangent u_i vs u_i') and at j (with -d).
     let cos_at = |u: [f32; 2], v: [f32; 2], sign: f32| {
         // (u . d, u x d) / |d| for the input and the reference, then their dot.
-        let (cq, sq) = (sign * (u[0] * dq[0] + u[1] * dq[1]) / lq, sign * (u[0] * dq[1] - u[1] * dq[0]) / lq);
-        let (cr, sr) = (sign * (v[0] * dr[0] + v[1] * dr[1]) / lr, sign * (v[0] * dr[1] - v[1] * dr[0]) / lr);
+        let (cq, sq) = (
+            sign * (u[0] * dq[0] + u[1] * dq[1]) / lq,
+            sign * (u[0] * dq[1] - u[1] * dq[0]) / lq,
+        );
+        let (cr, sr) = (
+            sign * (v[0] * dr[0] + v[1] * dr[1]) / lr,
+            sign * (v[0] * dr[1] - v[1] * dr[0]) / lr,
+        );
         cq * cr + sq * sr
     };
     let c1 = cos_at(*q_tan.get(i)?, *r_tan.get(ii)?, 1.0);

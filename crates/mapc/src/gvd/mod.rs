@@ -4,33 +4,42 @@
 //! points. On the grid it is extracted from the feature transform of
 //! [`crate::edt`] (the nearest obstacle cell of every cell):
 //!
+//! 0. **Specks.** Isolated obstacle components smaller than
+//!    [`GvdOptions::min_obstacle_area_m2`] (laser noise, single unknown
+//!    cells, chair legs) are left out of the distance field the GVD is
+//!    extracted from; otherwise each would add a small loop and two
+//!    vertices. They still count for clearance, for the sites' robot-radius
+//!    check and for lines of sight.
 //! 1. **Candidates.** A free cell `p` whose clearance (distance from its
 //!    centre to the nearest obstacle cell centre) is at least the robot
 //!    radius is a candidate when one of its free 4-neighbours `q` has its
 //!    nearest obstacle far from `p`'s: `|f(p) - f(q)| > max(min_separation_cells,
 //!    separation_factor * clearance(p))` (cells). The absolute term ignores
-//!    the jitter of neighbouring features along one wall; the relative term
-//!    ignores the Voronoi boundaries of small wall bumps far from them (a
-//!    bump of height `b` cells produces feature jumps of about
-//!    `sqrt(2 b d)` at clearance `d`).
+//!    the jitter of neighbouring features along one wall. The relative term
+//!    is off by default: it also cuts the (real) GVD branch from a door into
+//!    a room whose clearance exceeds the door width over the factor, which
+//!    leaves fragments; noise is left to pruning instead.
 //! 2. **Holes.** A hole in the candidate set that holds no obstacle cell
 //!    cannot be a Voronoi cycle (every GVD cycle encloses an obstacle); such
 //!    holes are filled so that thinning does not keep spurious little loops.
 //! 3. **Thinning.** Parallel two-sub-iteration thinning (Guo & Hall) of
-//!    the candidate set until stable, then staircase corners are cut: a
-//!    one-cell-wide, 8-connected skeleton with the candidate set's topology
-//!    and its end points, so a corridor (whose candidate band is two cells
-//!    wide, one on each side of the centre line) gives one line.
+//!    the candidate set until stable, then one-cell tips are removed and
+//!    staircase corners cut: a one-cell-wide, 8-connected skeleton with the
+//!    candidate set's topology, so a corridor (whose candidate band is two
+//!    cells wide, one on each side of the centre line) gives one line.
 //! 4. **Spur pruning.** An end branch (from an end point to a vertex of
-//!    degree >= 3) shorter than `max(min_spur_m, spur_clearance_factor *
-//!    clearance at its vertex)` is removed; the branch into a room corner
-//!    is about `sqrt(2)` times the clearance at its vertex long, a branch to
-//!    a bump in a noisy wall about one clearance. When every branch of a
-//!    vertex qualifies, the longest is kept. Repeated (with re-thinning)
-//!    until no branch qualifies.
+//!    degree >= 3) is removed when it is shorter than `max(min_spur_m,
+//!    spur_clearance_factor * clearance at its vertex)` (the branch into a
+//!    room corner is about `sqrt(2)` times the clearance at its vertex
+//!    long, a branch to a bump in a noisy wall about one clearance), or when
+//!    most of its cells are closer than the robot radius to a speck (a
+//!    branch through clutter, typically the ray streaks of a badly mapped
+//!    area broken into specks). When every branch of a vertex qualifies,
+//!    the longest is kept. Repeated (with re-thinning) until no branch
+//!    qualifies.
 //! 5. **Small components.** Connected pieces of the skeleton with a total
-//!    length below `min_component_m` are removed (specks of free space in
-//!    unknown areas, fragments in cluttered corners).
+//!    length below `min_component_m`, or mostly closer than the robot radius
+//!    to specks, are removed (fragments in small rooms and clutter).
 //!
 //! Obstacles are occupied cells, unknown cells (unless
 //! [`GvdOptions::unknown_is_obstacle`] is false) and the image border ring
@@ -40,8 +49,8 @@
 //! on a cycle with no vertex (a corridor around a closed block), one
 //! synthetic node of degree 2 at the cycle's cell of largest clearance.
 //! Edges carry their cell polyline from node `a` to node `b`. Every step is
-//! sequential or per-row parallel with a fixed order: the result does not
-//! depend on the thread count.
+//! sequential, or parallel with decisions taken on a snapshot: the result
+//! does not depend on the thread count.
 
 use std::collections::{HashMap, HashSet};
 
@@ -63,9 +72,10 @@ pub struct GvdOptions {
     /// Minimum distance between the nearest obstacle cells of two
     /// 4-neighbours for a GVD candidate (cells; default 2.0).
     pub min_separation_cells: f64,
-    /// Minimum feature separation relative to the clearance (default 0.35:
-    /// the two nearest obstacle points must be at least 20 degrees apart as
-    /// seen from the cell).
+    /// Minimum feature separation relative to the clearance (default 0.0,
+    /// off; 0.35 would ask the two nearest obstacle points to be 20 degrees
+    /// apart as seen from the cell, which also breaks door branches into
+    /// large rooms).
     pub separation_factor: f64,
     /// End branches shorter than this are always pruned (metres; default 0.5).
     pub min_spur_m: f64,
@@ -110,7 +120,9 @@ pub struct GvdNode {
     pub x: f64,
     /// Map-frame y of the cell centre (metres).
     pub y: f64,
-    /// Distance to the nearest obstacle cell centre (metres).
+    /// Distance to the nearest obstacle cell centre (metres), specks
+    /// included: where the GVD passes a speck it ignores this can be below
+    /// the robot radius.
     pub clearance: f64,
     /// Number of edge ends at this node (a self-loop counts twice): 1 for an
     /// end point, >= 3 for a vertex, 2 for the synthetic node of a cycle.

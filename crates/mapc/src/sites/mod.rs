@@ -119,6 +119,14 @@ pub struct Coverage {
 /// spacing sites of each edge (in edge order, from node `a` to node `b`),
 /// then fill sites (in the order they were chosen).
 ///
+/// An edge of length `L` gets `ceil(L / edge_spacing_m) - 1` evenly spaced
+/// sites (by arc length, snapped to the edge's cells). Every site keeps at
+/// least `robot_radius_m` of clearance: where the GVD passes closer than
+/// that to a speck it ignores (see [`crate::gvd`]), a spacing site moves
+/// along the edge by up to a quarter of the spacing, or is dropped, and a
+/// node is not a site; the neighbour links then join the sites on either
+/// side.
+///
 /// `dist` is the distance field the GVD was built from; lines of sight for
 /// filling are blocked by occupied cells, and by unknown cells when
 /// `dist.unknown_is_obstacle`.

@@ -287,12 +287,13 @@ fn shared_maps_report() {
     let opts = SiteOptions::default();
     let gopts = GvdOptions::default();
     eprintln!(
-        "{:<16} {:>9} {:>8} {:>8} {:>5} {:>5} {:>5} {:>5} {:>8} {:>8} {:>8} {:>8}",
+        "{:<16} {:>9} {:>8} {:>8} {:>5} {:>5} {:>5} {:>5} {:>5} {:>8} {:>8} {:>8} {:>8}",
         "map",
         "cells",
         "free",
         "gvd_m",
         "vert",
+        "comps",
         "sites",
         "fill",
         "cover",
@@ -321,12 +322,13 @@ fn shared_maps_report() {
         let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
         let name = y.file_stem().unwrap().to_string_lossy().into_owned();
         eprintln!(
-            "{:<16} {:>9} {:>8} {:>8.1} {:>5} {:>5} {:>5} {:>5.3} {:>8.1} {:>8.1} {:>8.1} {:>8.1}",
+            "{:<16} {:>9} {:>8} {:>8.1} {:>5} {:>5} {:>5} {:>5} {:>5.3} {:>8.1} {:>8.1} {:>8.1} {:>8.1}",
             name,
             g.cells.len(),
             g.free_count(),
             b.gvd.total_length_m(),
             b.gvd.vertex_count(),
+            components(&b.gvd),
             b.sites.len(),
             b.sites.iter().filter(|s| s.kind == SiteKind::Fill).count(),
             cov.fraction,
@@ -340,6 +342,29 @@ fn shared_maps_report() {
             dump(&name, g, &b, &cov);
         }
     }
+}
+
+/// Connected components of a GVD graph.
+fn components(g: &GvdGraph) -> usize {
+    let mut parent: Vec<usize> = (0..g.nodes.len()).collect();
+    fn find(p: &mut [usize], mut x: usize) -> usize {
+        while p[x] != x {
+            x = p[x];
+        }
+        x
+    }
+    let mut n = g.nodes.len();
+    for e in &g.edges {
+        let (a, b) = (
+            find(&mut parent, e.a as usize),
+            find(&mut parent, e.b as usize),
+        );
+        if a != b {
+            parent[a] = b;
+            n -= 1;
+        }
+    }
+    n
 }
 
 /// The whole build of a real map (Intel) is the same with 1 and 2 threads.
@@ -428,4 +453,56 @@ fn dump(name: &str, g: &OccupancyGrid, b: &Built, cov: &Coverage) {
             out.save(format!("/tmp/mapc-gvd/{name}-crop.png")).unwrap();
         }
     }
+}
+
+/// Peak memory and time of the whole build on a big map: the Intel map
+/// tiled `MAPC_TILES` x `MAPC_TILES` times (default 6: 5328 x 5088 cells).
+/// `cargo test --release -p mapc --lib big_map -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn big_map_memory_and_time() {
+    let Some(yamls) = shared_maps() else { return };
+    let Some(y) = yamls.iter().find(|p| p.ends_with("intel/intel.yaml")) else {
+        return;
+    };
+    let tiles: u32 = std::env::var("MAPC_TILES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(6);
+    let src = load_yaml(y).unwrap().grid;
+    let (w, h) = (src.width * tiles, src.height * tiles);
+    let mut cells = Vec::with_capacity((w * h) as usize);
+    for cy in 0..h {
+        for cx in 0..w {
+            cells.push(src.get(cx % src.width, cy % src.height));
+        }
+    }
+    drop(src);
+    let g = OccupancyGrid::from_cells(w, h, 0.05, [0.0; 3], cells);
+    let hwm = || {
+        std::fs::read_to_string("/proc/self/status")
+            .ok()
+            .and_then(|s| {
+                s.lines()
+                    .find(|l| l.starts_with("VmHWM"))
+                    .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+            })
+            .unwrap_or(0)
+            * 1024
+    };
+    let before = hwm();
+    let t = Instant::now();
+    let opts = SiteOptions::default();
+    let b = build(&g, &opts);
+    let secs = t.elapsed().as_secs_f64();
+    let cells_n = (w as u64) * (h as u64);
+    eprintln!(
+        "{w} x {h} = {cells_n} cells: {:.2} s, {} sites, gvd {:.0} m; peak RSS {:.1} MB before, {:.1} MB after ({:.1} bytes/cell)",
+        secs,
+        b.sites.len(),
+        b.gvd.total_length_m(),
+        before as f64 / 1e6,
+        hwm() as f64 / 1e6,
+        hwm() as f64 / cells_n as f64
+    );
 }

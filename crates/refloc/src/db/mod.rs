@@ -209,7 +209,7 @@ impl<D: AsRef<[u8]>> RefDb<D> {
         BitGrid::new(w, h, words).unwrap_or(BitGrid::empty())
     }
 
-    /// Quantized distance map, one byte per cell (see [`format::DIST_STEPS_PER_CELL`]).
+    /// Quantized signed distance map, one byte per cell (see [`format::dist_cells`]).
     pub fn dist(&self) -> &[u8] {
         self.section(SectionKind::Dist)
     }
@@ -262,6 +262,22 @@ impl<D: AsRef<[u8]>> RefDb<D> {
         let all = <[f32]>::ref_from_bytes(self.section(SectionKind::Hists)).unwrap_or(&[]);
         let k = self.params.hist_cells();
         all.get(i.saturating_mul(k)..i.saturating_add(1).saturating_mul(k))
+            .unwrap_or(&[])
+    }
+
+    /// Window histogram of site `i`, width slot `w`, heading `h` (see
+    /// [`crate::coarse`]); empty when absent.
+    pub fn window_hist(&self, i: usize, w: usize, h: usize) -> &[f32] {
+        let p = &self.params;
+        let (nw, nh, k) = (p.win_count(), p.win_headings as usize, p.win_cells());
+        if w >= nw || h >= nh {
+            return &[];
+        }
+        let all = <[f32]>::ref_from_bytes(self.section(SectionKind::Windows)).unwrap_or(&[]);
+        let idx = (i.saturating_mul(nw).saturating_add(w))
+            .saturating_mul(nh)
+            .saturating_add(h);
+        all.get(idx.saturating_mul(k)..idx.saturating_add(1).saturating_mul(k))
             .unwrap_or(&[])
     }
 
@@ -468,6 +484,9 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
         SectionKind::Hists,
         sz(n_sites, params.hist_cells() as u64 * 4),
     )?;
+    let per_site_windows =
+        params.win_count() as u64 * params.win_headings as u64 * params.win_cells() as u64 * 4;
+    exact(SectionKind::Windows, sz(n_sites, per_site_windows))?;
     let nb_len = sec(SectionKind::Neighbors).len();
     if nb_len % 4 != 0 {
         return Err(DbError::new(
@@ -505,6 +524,7 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
         SectionKind::Scans,
         SectionKind::Hists,
         SectionKind::Neighbors,
+        SectionKind::Windows,
     ] {
         let s = sec(k);
         if <[u32]>::ref_from_bytes(s).is_err() {

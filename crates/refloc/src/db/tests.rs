@@ -1,1 +1,1078 @@
+//! The corruption suite: every way a `.refdb` can be damaged gives a typed
+//! [`DbError`], never a panic, and a database that passes [`RefDb::new`] is
+//! safe to use whatever its contents.
+//!
+//! Damaged files are made two ways: by re-encoding modified sections with
+//! `format::encode` (all checksums valid, so the structural checks are
+//! reached), and by patching bytes of a good file (the header checksum, or a
+//! section checksum, no longer matches).
 
+use std::format;
+use std::vec;
+use std::vec::Vec;
+
+use zerocopy::little_endian::{F32, U32, U64};
+use zerocopy::{FromBytes, IntoBytes};
+
+use super::*;
+use crate::format::{ParamsRecord, SiteRecord};
+use crate::raycast::Occupancy;
+use crate::tests::fixture::{self, Aligned, Prng};
+use crate::{localize, scratch_size, RangeScan, Scan};
+
+type Sections = Vec<(SectionKind, Vec<u8>)>;
+
+/// A valid tiny database (see `crate::tests::fixture`).
+fn tiny_db() -> Vec<u8> {
+    fixture::encode(&fixture::sections())
+}
+
+/// `RefDb::new` on a 4-byte aligned copy of `bytes`.
+fn open(bytes: &[u8]) -> Result<(), DbError> {
+    let buf = Aligned::new(bytes);
+    RefDb::new(buf.bytes()).map(|_| ())
+}
+
+/// Kinds whose message does not name the context (it is always "header").
+fn context_free(kind: DbErrorKind) -> bool {
+    matches!(
+        kind,
+        DbErrorKind::Magic
+            | DbErrorKind::Endian
+            | DbErrorKind::Version
+            | DbErrorKind::HeaderChecksum
+            | DbErrorKind::HostEndian
+    )
+}
+
+/// Checks the message of an error: non-empty, names its section or field.
+fn check_message(e: &DbError) {
+    let msg = e.to_string();
+    assert!(!msg.is_empty(), "{e:?}");
+    if !context_free(e.kind) {
+        assert!(
+            msg.contains(e.context),
+            "message {msg:?} does not name {:?}",
+            e.context
+        );
+    }
+}
+
+/// Asserts that `bytes` is rejected with `kind` (and `context`, if given).
+#[track_caller]
+fn expect(bytes: &[u8], kind: DbErrorKind, context: Option<&str>) -> DbError {
+    let e = match open(bytes) {
+        Err(e) => e,
+        Ok(()) => panic!("accepted; expected {kind:?} {context:?}"),
+    };
+    assert_eq!(e.kind, kind, "{e:?}: {e}");
+    if let Some(c) = context {
+        assert_eq!(e.context, c, "{e:?}: {e}");
+    }
+    check_message(&e);
+    e
+}
+
+/// Re-encodes `sections` after `edit` changed them.
+fn reencode(edit: impl FnOnce(&mut Sections)) -> Vec<u8> {
+    let mut s = fixture::sections();
+    edit(&mut s);
+    fixture::encode(&s)
+}
+
+fn section_mut(s: &mut Sections, kind: SectionKind) -> &mut Vec<u8> {
+    &mut s
+        .iter_mut()
+        .find(|(k, _)| *k == kind)
+        .expect("section present")
+        .1
+}
+
+fn edit_meta(s: &mut Sections, f: impl FnOnce(&mut MetaRecord)) {
+    let b = section_mut(s, SectionKind::Meta);
+    let mut m = MetaRecord::read_from_bytes(b).unwrap();
+    f(&mut m);
+    *b = m.as_bytes().to_vec();
+}
+
+fn edit_params(s: &mut Sections, f: impl FnOnce(&mut ParamsRecord)) {
+    let b = section_mut(s, SectionKind::Params);
+    let mut p = ParamsRecord::read_from_bytes(b).unwrap();
+    f(&mut p);
+    *b = p.as_bytes().to_vec();
+}
+
+fn edit_sites(s: &mut Sections, f: impl FnOnce(&mut [SiteRecord])) {
+    let b = section_mut(s, SectionKind::Sites);
+    let mut sites = <[SiteRecord]>::ref_from_bytes(b).unwrap().to_vec();
+    f(&mut sites);
+    *b = sites.as_bytes().to_vec();
+}
+
+/// Byte range of table entry `i`.
+fn entry_range(i: usize) -> Range<usize> {
+    HEADER_LEN + i * ENTRY_LEN..HEADER_LEN + (i + 1) * ENTRY_LEN
+}
+
+fn entry(bytes: &[u8], i: usize) -> SectionEntry {
+    SectionEntry::read_from_bytes(&bytes[entry_range(i)]).unwrap()
+}
+
+fn set_entry(bytes: &mut [u8], i: usize, e: SectionEntry) {
+    bytes[entry_range(i)].copy_from_slice(e.as_bytes());
+}
+
+/// Table index of `kind` in a fixture file (sections are in `ALL` order).
+fn index_of(kind: SectionKind) -> usize {
+    SectionKind::ALL.iter().position(|k| *k == kind).unwrap()
+}
+
+/// Byte range of section `kind` in a fixture file.
+fn section_range(bytes: &[u8], kind: SectionKind) -> Range<usize> {
+    let e = entry(bytes, index_of(kind));
+    e.offset.get() as usize..(e.offset.get() + e.len.get()) as usize
+}
+
+/// Recomputes the header checksum after a header or table patch.
+fn fix_header_crc(bytes: &mut [u8]) {
+    let mut h = Header::read_from_bytes(&bytes[..HEADER_LEN]).unwrap();
+    let n = (h.section_count.get() as usize).min(MAX_SECTIONS);
+    let end = (HEADER_LEN + n * ENTRY_LEN).min(bytes.len());
+    h.header_crc = U32::new(format::header_crc(&h, &bytes[HEADER_LEN..end]));
+    bytes[..HEADER_LEN].copy_from_slice(h.as_bytes());
+}
+
+/// Applies a header/table patch two ways: with the header checksum fixed
+/// (expect `kind`) and without (expect `HeaderChecksum`, unless the patch is
+/// caught before the checksum, as magic, endianness and version are).
+#[track_caller]
+fn patch_both(patch: impl Fn(&mut Vec<u8>), kind: DbErrorKind, context: Option<&str>) -> DbError {
+    let mut raw = tiny_db();
+    patch(&mut raw);
+    // What the reader checks before the header checksum.
+    let before_crc = matches!(
+        kind,
+        DbErrorKind::Magic | DbErrorKind::Endian | DbErrorKind::Version
+    ) || (kind == DbErrorKind::Table
+        && matches!(context, Some("header length" | "section count")));
+    if before_crc {
+        expect(&raw, kind, context);
+    } else {
+        expect(&raw, DbErrorKind::HeaderChecksum, None);
+    }
+    fix_header_crc(&mut raw);
+    expect(&raw, kind, context)
+}
+
+// ---------------------------------------------------------------------------
+
+#[test]
+fn fixture_is_a_valid_database() {
+    let bytes = tiny_db();
+    let buf = Aligned::new(&bytes);
+    let db = RefDb::new(buf.bytes()).expect("valid");
+    db.verify().expect("checksums");
+    assert_eq!(db.grid_size(), (fixture::W, fixture::H));
+    assert_eq!(db.site_count(), 3);
+    assert_eq!(db.sites().len(), 3);
+    assert_eq!(db.params(), &fixture::params());
+    assert_eq!(db.frame(), fixture::frame());
+    assert_eq!(db.neighbors(0), &[1]);
+    assert_eq!(db.neighbors(1), &[0, 2]);
+    assert_eq!(db.neighbors(2), &[1]);
+    assert_eq!(db.neighbors(3), &[] as &[u32]);
+    for i in 0..3 {
+        assert_eq!(db.scan(i).len(), fixture::BEAMS as usize);
+        let sum: f32 = db.hist(i).iter().sum();
+        assert!((sum - 1.0).abs() < 1e-4, "hist {i} sums to {sum}");
+        let xy = db.site_xy(i);
+        let want = fixture::site_xy()[i];
+        assert_eq!(xy, want);
+    }
+    assert!(db.scan(3).is_empty() && db.hist(3).is_empty() && db.site(3).is_none());
+    assert_eq!(db.site_xy(99), [0.0, 0.0]);
+    assert_eq!(db.dist().len(), (fixture::W * fixture::H) as usize);
+    assert!(db.manifest().contains("refloc unit tests"));
+    assert_eq!(db.bytes(), &bytes[..]);
+    let grid = db.grid();
+    for cy in 0..fixture::H {
+        for cx in 0..fixture::W {
+            assert_eq!(grid.blocked(cx, cy), fixture::blocked(cx, cy));
+        }
+    }
+    for k in SectionKind::ALL {
+        assert_eq!(db.section_crc(k), crc::crc32c(db.section(k)));
+    }
+}
+
+#[test]
+fn aligned_and_misaligned_buffers() {
+    let bytes = tiny_db();
+    for off in [0, 4, 8, 12] {
+        let buf = Aligned::at(&bytes, off);
+        let db = RefDb::new(buf.bytes()).unwrap_or_else(|e| panic!("offset {off}: {e}"));
+        db.verify().unwrap();
+        // Owned containers work too.
+        let v: Vec<u8> = buf.bytes().to_vec();
+        if v.as_ptr() as usize % 4 == 0 {
+            RefDb::new(v).unwrap();
+        }
+    }
+    for off in [1, 2, 3, 5, 7] {
+        let buf = Aligned::at(&bytes, off);
+        let e = RefDb::new(buf.bytes())
+            .err()
+            .expect("misaligned arrays are rejected");
+        assert_eq!(e.kind, DbErrorKind::Alignment, "offset {off}: {e}");
+        assert!(
+            ["grid", "scans", "hists", "neighbors"].contains(&e.context),
+            "{e:?}"
+        );
+        assert_eq!(e.expected, 4);
+        check_message(&e);
+    }
+}
+
+#[test]
+fn truncation_at_every_length() {
+    let bytes = tiny_db();
+    // Prefixes of one aligned buffer are aligned too.
+    let buf = Aligned::new(&bytes);
+    let table_end = HEADER_LEN + SectionKind::ALL.len() * ENTRY_LEN;
+    for len in 0..bytes.len() {
+        let e = RefDb::new(&buf.bytes()[..len])
+            .err()
+            .expect("a truncated file is rejected");
+        assert_eq!(e.kind, DbErrorKind::Truncated, "length {len}: {e}");
+        let where_ = if len < HEADER_LEN {
+            "header"
+        } else if len < table_end {
+            "section table"
+        } else {
+            "file"
+        };
+        assert_eq!(e.context, where_, "length {len}");
+        if len >= table_end {
+            assert_eq!((e.expected, e.found), (bytes.len() as u64, len as u64));
+        }
+        check_message(&e);
+    }
+    // Appended bytes are caught the same way.
+    let mut long = bytes.clone();
+    long.extend_from_slice(&[0; 16]);
+    let e = expect(&long, DbErrorKind::Truncated, Some("file"));
+    assert_eq!(
+        (e.expected, e.found),
+        (bytes.len() as u64, long.len() as u64)
+    );
+}
+
+#[test]
+fn every_flipped_header_byte_is_caught() {
+    let good = tiny_db();
+    for i in 0..HEADER_LEN {
+        for mask in [0x01u8, 0x80, 0xFF] {
+            let mut b = good.clone();
+            b[i] ^= mask;
+            let e = open(&b).expect_err("a damaged header is rejected");
+            use DbErrorKind::*;
+            let ok = match i {
+                0..8 => e.kind == Magic,
+                8..10 => e.kind == Endian,
+                10..12 => e.kind == Table && e.context == "header length",
+                12..16 => e.kind == Version,
+                // section_count: a count out of range, a table past the end,
+                // or a different table under the same checksum.
+                20..24 => matches!(e.kind, Table | Truncated | HeaderChecksum),
+                _ => e.kind == HeaderChecksum,
+            };
+            assert!(ok, "byte {i} ^ {mask:#04x}: {e:?}");
+            check_message(&e);
+        }
+    }
+}
+
+#[test]
+fn every_flipped_table_byte_is_caught() {
+    let good = tiny_db();
+    let table_end = HEADER_LEN + SectionKind::ALL.len() * ENTRY_LEN;
+    for i in HEADER_LEN..table_end {
+        let mut b = good.clone();
+        b[i] ^= 0x10;
+        expect(&b, DbErrorKind::HeaderChecksum, None);
+    }
+}
+
+/// True when a params section would hit the u32 overflow in
+/// `Params::validate` (see `bin_product_overflow_is_a_value_error`): the
+/// tests that damage bytes at random skip such files so the rest of their
+/// coverage still runs.
+fn known_overflow(params: &[u8]) -> bool {
+    match ParamsRecord::read_from_bytes(params) {
+        Ok(p) => {
+            p.hist_rho_bins
+                .get()
+                .checked_mul(p.hist_theta_bins.get())
+                .is_none()
+                || p.win_rho_bins
+                    .get()
+                    .checked_mul(p.win_theta_bins.get())
+                    .is_none()
+        }
+        Err(_) => false,
+    }
+}
+
+/// Byte positions to damage in a section: all of a small one; the ends and
+/// a stride through a large one.
+fn positions(r: Range<usize>) -> Vec<usize> {
+    if r.len() <= 4096 {
+        return r.collect();
+    }
+    let (a, b) = (r.start, r.end);
+    (a..a + 64)
+        .chain((a + 64..b - 64).step_by(29))
+        .chain(b - 64..b)
+        .collect()
+}
+
+#[test]
+fn every_flipped_section_byte_is_caught() {
+    let good = tiny_db();
+    let mut buf = Aligned::new(&good);
+    let (mut accepted, mut rejected) = (0, 0);
+    for kind in SectionKind::ALL {
+        let r = section_range(&good, kind);
+        assert!(!r.is_empty(), "{} is empty", kind.name());
+        for i in positions(r) {
+            for mask in [0x01u8, 0x80] {
+                buf.bytes_mut()[i] ^= mask;
+                let pr = section_range(&good, SectionKind::Params);
+                if known_overflow(&buf.bytes()[pr]) {
+                    buf.bytes_mut()[i] ^= mask;
+                    continue;
+                }
+                match RefDb::new(buf.bytes()) {
+                    Ok(db) => {
+                        accepted += 1;
+                        let e = db.verify().expect_err("verify catches every flip");
+                        assert_eq!(e.kind, DbErrorKind::SectionChecksum);
+                        assert_eq!(e.context, kind.name(), "byte {i} in {}", kind.name());
+                        assert_eq!(e.expected, db.section_crc(kind) as u64);
+                        assert_ne!(e.expected, e.found);
+                        check_message(&e);
+                    }
+                    Err(e) => {
+                        rejected += 1;
+                        // Caught by a structural check of the section's content.
+                        use DbErrorKind::*;
+                        assert!(
+                            matches!(e.kind, Size | Value | OutOfBounds),
+                            "byte {i} ^ {mask:#04x} in {}: {e:?}",
+                            kind.name()
+                        );
+                        assert!(
+                            matches!(
+                                kind,
+                                SectionKind::Meta
+                                    | SectionKind::Params
+                                    | SectionKind::Sites
+                                    | SectionKind::Neighbors
+                            ),
+                            "{} content is not checked by new(): {e:?}",
+                            kind.name()
+                        );
+                        check_message(&e);
+                    }
+                }
+                buf.bytes_mut()[i] ^= mask;
+            }
+        }
+    }
+    assert!(accepted > 1000 && rejected > 50, "{accepted} {rejected}");
+}
+
+#[test]
+fn wrong_magic() {
+    let mut b = tiny_db();
+    b[7] = b'X';
+    expect(&b, DbErrorKind::Magic, None);
+    for other in [
+        &b"\x89PNG\r\n\x1a\n0000"[..],
+        b"P5\n600 400\n255\n",
+        b"{\"json\": 1}",
+        &[0u8; 200],
+    ] {
+        expect(other, DbErrorKind::Magic, None);
+    }
+    // A proper prefix of the magic is a truncated file, anything else is not ours.
+    expect(b"REFL", DbErrorKind::Truncated, Some("header"));
+    expect(b"REFX", DbErrorKind::Magic, None);
+}
+
+#[test]
+fn wrong_endianness() {
+    let e = patch_both(
+        |b| b[8..10].copy_from_slice(&[0xFE, 0xFF]),
+        DbErrorKind::Endian,
+        None,
+    );
+    assert_eq!((e.expected, e.found), (0xFEFF, 0xFFFE));
+    assert!(e.to_string().contains("0xfffe"), "{e}");
+}
+
+#[test]
+fn wrong_version_names_both_versions() {
+    for v in [0u32, 2, 7, u32::MAX] {
+        let e = patch_both(
+            |b| b[12..16].copy_from_slice(&v.to_le_bytes()),
+            DbErrorKind::Version,
+            None,
+        );
+        assert_eq!((e.expected, e.found), (FORMAT_VERSION as u64, v as u64));
+        let msg = e.to_string();
+        assert!(msg.contains(&format!("version {v}")), "{msg}");
+        assert!(msg.contains(&format!("version {FORMAT_VERSION}")), "{msg}");
+    }
+}
+
+#[test]
+fn bad_header_fields() {
+    use DbErrorKind::*;
+    patch_both(|b| b[10] = 65, Table, Some("header length"));
+    for n in [0u32, MAX_SECTIONS as u32 + 1, u32::MAX] {
+        patch_both(
+            |b| b[20..24].copy_from_slice(&n.to_le_bytes()),
+            Table,
+            Some("section count"),
+        );
+    }
+    // One entry fewer: the last section is missing.
+    let last = SectionKind::ALL[SectionKind::ALL.len() - 1].name();
+    patch_both(|b| b[20] -= 1, Missing, Some(last));
+    // One entry more: the table now runs into the first section.
+    let first = SectionKind::ALL[0].name();
+    patch_both(|b| b[20] += 1, Overlap, Some(first));
+    // A table running past the end of a short file.
+    let mut b = tiny_db();
+    b.truncate(HEADER_LEN + 2 * ENTRY_LEN);
+    expect(&b, Truncated, Some("section table"));
+    // A file length that disagrees with the real one.
+    for delta in [-16i64, 16, 1 << 40] {
+        patch_both(
+            |b| {
+                let n = (b.len() as i64 + delta) as u64;
+                b[24..32].copy_from_slice(&n.to_le_bytes())
+            },
+            Truncated,
+            Some("file"),
+        );
+    }
+    // A stored checksum that is simply wrong.
+    let mut b = tiny_db();
+    b[32] ^= 1;
+    let e = expect(&b, HeaderChecksum, None);
+    assert_ne!(e.expected, e.found);
+}
+
+#[test]
+fn section_offsets_and_lengths() {
+    use DbErrorKind::*;
+    let good = tiny_db();
+    let file_len = good.len() as u64;
+    let meta = index_of(SectionKind::Meta);
+    let grid = index_of(SectionKind::Grid);
+    let dist = index_of(SectionKind::Dist);
+    let sites = index_of(SectionKind::Sites);
+    let manifest = index_of(SectionKind::Manifest);
+    let with = |i: usize, f: fn(&mut SectionEntry, u64)| {
+        move |b: &mut Vec<u8>| {
+            let mut e = entry(b, i);
+            f(&mut e, b.len() as u64);
+            set_entry(b, i, e);
+        }
+    };
+    // Past the end of the file.
+    let e = patch_both(
+        with(manifest, |e, n| e.offset = U64::new(n.next_multiple_of(16))),
+        OutOfBounds,
+        Some("manifest"),
+    );
+    assert!(e.found > file_len && e.expected == file_len);
+    patch_both(
+        with(dist, |e, n| e.offset = U64::new(n + 4096)),
+        OutOfBounds,
+        Some("dist"),
+    );
+    patch_both(
+        with(grid, |e, n| e.len = U64::new(n)),
+        OutOfBounds,
+        Some("grid"),
+    );
+    // offset + len overflowing u64.
+    let e = patch_both(
+        with(sites, |e, _| {
+            e.offset = U64::new(u64::MAX - 15);
+            e.len = U64::new(32)
+        }),
+        OutOfBounds,
+        Some("sites"),
+    );
+    assert_eq!(e.found, u64::MAX);
+    patch_both(
+        with(sites, |e, _| {
+            e.offset = U64::new(1 << 63);
+            e.len = U64::new(1 << 63)
+        }),
+        OutOfBounds,
+        Some("sites"),
+    );
+    patch_both(
+        with(meta, |e, _| e.len = U64::new(u64::MAX)),
+        OutOfBounds,
+        Some("meta"),
+    );
+    // Misaligned offsets.
+    for delta in [4u64, 1, 8] {
+        let f = match delta {
+            4 => with(meta, |e, _| e.offset = U64::new(e.offset.get() + 4)),
+            1 => with(dist, |e, _| e.offset = U64::new(e.offset.get() + 1)),
+            _ => with(sites, |e, _| e.offset = U64::new(e.offset.get() - 8)),
+        };
+        let e = patch_both(f, Alignment, None);
+        assert_eq!(e.expected, SECTION_ALIGN as u64);
+        assert!(["meta", "dist", "sites"].contains(&e.context));
+    }
+    // Overlaps: with the table, with an earlier section, partially.
+    patch_both(
+        with(grid, |e, _| e.offset = U64::new(0)),
+        Overlap,
+        Some("grid"),
+    );
+    patch_both(
+        with(grid, |e, _| e.offset = U64::new(64)),
+        Overlap,
+        Some("grid"),
+    );
+    let grid_off = entry(&good, grid).offset.get();
+    let dist_off = entry(&good, dist).offset.get();
+    let mut b = good.clone();
+    let mut e = entry(&b, dist);
+    e.offset = U64::new(grid_off);
+    set_entry(&mut b, dist, e);
+    fix_header_crc(&mut b);
+    expect(&b, Overlap, Some("dist"));
+    let mut b = good.clone();
+    let mut e = entry(&b, sites);
+    e.offset = U64::new(dist_off + 16);
+    set_entry(&mut b, sites, e);
+    fix_header_crc(&mut b);
+    expect(&b, Overlap, Some("sites"));
+    // The same overlap without fixing the header checksum.
+    let mut b = good.clone();
+    set_entry(&mut b, sites, e);
+    expect(&b, HeaderChecksum, None);
+}
+
+#[test]
+fn section_kinds_in_the_table() {
+    use DbErrorKind::*;
+    let unknown = SectionKind::ALL.len() as u32 + 1;
+    for raw in [0u32, unknown, 99, u32::MAX] {
+        let e = patch_both(
+            |b| b[HEADER_LEN..HEADER_LEN + 4].copy_from_slice(&raw.to_le_bytes()),
+            Table,
+            Some("unknown section kind"),
+        );
+        assert_eq!(e.found, raw as u64);
+    }
+    // Two entries of the same kind (via the table, and via the encoder).
+    patch_both(
+        |b| b[entry_range(1).start..entry_range(1).start + 4].copy_from_slice(&1u32.to_le_bytes()),
+        Table,
+        Some("duplicate section kind"),
+    );
+    let b = reencode(|s| {
+        let meta = s[0].clone();
+        s.push(meta);
+    });
+    expect(&b, Table, Some("duplicate section kind"));
+    // Each section missing in turn.
+    for k in SectionKind::ALL {
+        let b = reencode(|s| s.retain(|(kk, _)| *kk != k));
+        expect(&b, Missing, Some(k.name()));
+    }
+    // A kind changed to a missing one, through the table.
+    let e = patch_both(
+        |b| {
+            let i = entry_range(index_of(SectionKind::Hists)).start;
+            b[i..i + 4].copy_from_slice(&(SectionKind::Manifest as u32).to_le_bytes())
+        },
+        Table,
+        Some("duplicate section kind"),
+    );
+    assert_eq!(e.found, SectionKind::Manifest as u64);
+    // Section order does not matter.
+    let b = reencode(|s| s.reverse());
+    open(&b).expect("sections in any order");
+}
+
+#[test]
+fn section_sizes() {
+    use DbErrorKind::*;
+    for (kind, ctx) in [
+        (SectionKind::Meta, "meta"),
+        (SectionKind::Params, "params"),
+        (SectionKind::Grid, "grid"),
+        (SectionKind::Dist, "dist"),
+        (SectionKind::Sites, "sites"),
+        (SectionKind::Scans, "scans"),
+        (SectionKind::Hists, "hists"),
+    ] {
+        for delta in [-4i64, 4, -1] {
+            let b = reencode(|s| {
+                let v = section_mut(s, kind);
+                let n = (v.len() as i64 + delta) as usize;
+                v.resize(n, 0);
+            });
+            let e = expect(&b, Size, Some(ctx));
+            assert_ne!(e.expected, e.found);
+        }
+        let b = reencode(|s| section_mut(s, kind).clear());
+        expect(&b, Size, Some(ctx));
+    }
+    let b = reencode(|s| section_mut(s, SectionKind::Neighbors).push(0));
+    expect(&b, Size, Some("neighbors"));
+    // An empty neighbour list is fine when no site points into it.
+    let b = reencode(|s| {
+        section_mut(s, SectionKind::Neighbors).clear();
+        edit_sites(s, |sites| {
+            for st in sites {
+                st.neighbor_start = U32::new(0);
+                st.neighbor_count = U32::new(0);
+            }
+        });
+    });
+    open(&b).expect("no neighbours");
+    // An empty manifest is fine.
+    let b = reencode(|s| section_mut(s, SectionKind::Manifest).clear());
+    open(&b).expect("empty manifest");
+}
+
+#[test]
+fn windows_section_size_is_checked() {
+    for delta in [-4i64, 4] {
+        let b = reencode(|s| {
+            let v = section_mut(s, SectionKind::Windows);
+            let n = (v.len() as i64 + delta) as usize;
+            v.resize(n, 0);
+        });
+        expect(&b, DbErrorKind::Size, Some("windows"));
+    }
+    let b = reencode(|s| section_mut(s, SectionKind::Windows).clear());
+    expect(&b, DbErrorKind::Size, Some("windows"));
+}
+
+#[test]
+fn absurd_grid_and_site_counts() {
+    use DbErrorKind::*;
+    let (w, h) = (fixture::W, fixture::H);
+    for (nw, nh) in [
+        (65536, 65536),
+        (u32::MAX, u32::MAX),
+        (u32::MAX, 1),
+        (1, u32::MAX),
+        (w + 1, h),
+        (w, h * 2),
+    ] {
+        let b = reencode(|s| {
+            edit_meta(s, |m| {
+                m.width = U32::new(nw);
+                m.height = U32::new(nh)
+            })
+        });
+        let e = expect(&b, Size, Some("grid"));
+        assert_eq!(e.found, (w * h).div_ceil(32) as u64 * 4, "{nw} x {nh}");
+    }
+    for (nw, nh) in [(0, h), (w, 0), (0, 0)] {
+        let b = reencode(|s| {
+            edit_meta(s, |m| {
+                m.width = U32::new(nw);
+                m.height = U32::new(nh)
+            })
+        });
+        expect(&b, Value, Some("grid size"));
+    }
+    for n in [4u32, 1000, u32::MAX] {
+        let b = reencode(|s| edit_meta(s, |m| m.site_count = U32::new(n)));
+        let e = expect(&b, Size, Some("sites"));
+        assert_eq!(e.expected, n as u64 * 24);
+    }
+    let b = reencode(|s| edit_meta(s, |m| m.site_count = U32::new(0)));
+    expect(&b, Value, Some("site count"));
+    // The same through a raw patch of the meta section: its checksum is now
+    // stale, but the structural check answers first.
+    let mut b = tiny_db();
+    let r = section_range(&b, SectionKind::Meta);
+    b[r.start..r.start + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    expect(&b, Size, Some("grid"));
+}
+
+#[test]
+fn meta_values() {
+    use DbErrorKind::*;
+    for res in [0.0f32, -0.05, f32::NAN, f32::INFINITY] {
+        let b = reencode(|s| edit_meta(s, |m| m.resolution = F32::new(res)));
+        expect(&b, Value, Some("resolution"));
+    }
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        let b = reencode(|s| edit_meta(s, |m| m.origin_yaw = F32::new(bad)));
+        expect(&b, Value, Some("origin"));
+        let b = reencode(|s| edit_meta(s, |m| m.origin_x = F32::new(bad)));
+        expect(&b, Value, Some("origin"));
+    }
+}
+
+#[test]
+fn params_out_of_range() {
+    use DbErrorKind::*;
+    type Edit = fn(&mut ParamsRecord);
+    let cases: [(Edit, &str); 14] = [
+        (|p| p.beams = U32::new(0), "beams"),
+        (|p| p.beams = U32::new(u32::MAX), "beams"),
+        (|p| p.sigma_d = F32::new(f32::NAN), "sigma_d"),
+        (|p| p.sigma_d = F32::new(0.0), "sigma_d"),
+        (
+            |p| p.angle_increment = F32::new(f32::NAN),
+            "angle_increment",
+        ),
+        (|p| p.angle_increment = F32::new(1.0), "angle_increment"),
+        (|p| p.range_max = F32::new(-1.0), "range_max/range_min"),
+        (|p| p.max_points = U32::new(100_000), "max_points"),
+        (|p| p.hist_rho_bins = U32::new(0), "histogram bins"),
+        (|p| p.hist_theta_bins = U32::new(1 << 20), "histogram bins"),
+        (|p| p.nc_max = U32::new(0), "nc_min/nc_max"),
+        (|p| p.tentative_k = U32::new(1000), "tentative_k"),
+        (|p| p.w[1] = F32::new(f32::INFINITY), "w"),
+        (|p| p.selection = U32::new(7), "selection"),
+    ];
+    for (edit, ctx) in cases {
+        let b = reencode(|s| edit_params(s, edit));
+        expect(&b, Value, Some(ctx));
+        // The same as a raw patch of the params section.
+        let mut raw = tiny_db();
+        let r = section_range(&raw, SectionKind::Params);
+        let mut p = ParamsRecord::read_from_bytes(&raw[r.clone()]).unwrap();
+        edit(&mut p);
+        raw[r].copy_from_slice(p.as_bytes());
+        expect(&raw, Value, Some(ctx));
+    }
+    // Valid but different histogram dimensions: the hists section no longer fits.
+    let b = reencode(|s| edit_params(s, |p| p.hist_rho_bins = U32::new(16)));
+    expect(&b, Size, Some("hists"));
+    let b = reencode(|s| edit_params(s, |p| p.beams = U32::new(90)));
+    expect(&b, Size, Some("scans"));
+}
+
+#[test]
+fn bin_product_overflow_is_a_value_error() {
+    use DbErrorKind::*;
+    let b = reencode(|s| {
+        edit_params(s, |p| {
+            p.hist_rho_bins = U32::new(1 << 31);
+            p.hist_theta_bins = U32::new(2)
+        })
+    });
+    expect(&b, Value, Some("histogram bins"));
+    let b = reencode(|s| {
+        edit_params(s, |p| {
+            p.win_rho_bins = U32::new(1 << 31);
+            p.win_theta_bins = U32::new(2)
+        })
+    });
+    expect(&b, Value, Some("window histogram layout"));
+}
+
+#[test]
+fn neighbours_and_sites() {
+    use DbErrorKind::*;
+    for bad in [3u32, 4, u32::MAX] {
+        let b = reencode(|s| {
+            let nb = section_mut(s, SectionKind::Neighbors);
+            nb[8..12].copy_from_slice(&bad.to_le_bytes());
+        });
+        expect(&b, Value, Some("neighbor index"));
+    }
+    // A site whose slice runs past the neighbour list.
+    type Edit = fn(&mut [SiteRecord]);
+    let slices: [Edit; 3] = [
+        |s| s[2].neighbor_count = U32::new(2),
+        |s| s[0].neighbor_start = U32::new(5),
+        |s| {
+            s[1].neighbor_start = U32::new(u32::MAX);
+            s[1].neighbor_count = U32::new(u32::MAX)
+        },
+    ];
+    for edit in slices {
+        let b = reencode(|s| edit_sites(s, edit));
+        expect(&b, OutOfBounds, Some("site neighbours"));
+    }
+    for bad in [f32::NAN, f32::INFINITY] {
+        let b = reencode(|s| edit_sites(s, |st| st[1].x = F32::new(bad)));
+        expect(&b, Value, Some("site position"));
+        let b = reencode(|s| edit_sites(s, |st| st[2].clearance = F32::new(bad)));
+        expect(&b, Value, Some("site position"));
+    }
+    // Raw patch of the neighbours section: caught by new(); verify would
+    // also have caught it.
+    let mut b = tiny_db();
+    let r = section_range(&b, SectionKind::Neighbors);
+    b[r.start..r.start + 4].copy_from_slice(&7u32.to_le_bytes());
+    expect(&b, Value, Some("neighbor index"));
+}
+
+#[test]
+fn data_sections_damaged_in_place_fail_verify() {
+    // Content that new() does not interpret: a raw patch passes new() and
+    // verify() names the section.
+    for kind in [
+        SectionKind::Grid,
+        SectionKind::Dist,
+        SectionKind::Scans,
+        SectionKind::Hists,
+        SectionKind::Manifest,
+        SectionKind::Windows,
+    ] {
+        let mut b = tiny_db();
+        let r = section_range(&b, kind);
+        b[r.start + r.len() / 2] ^= 0x40;
+        let buf = Aligned::new(&b);
+        let db = RefDb::new(buf.bytes()).expect("structure intact");
+        let e = db.verify().expect_err("checksum mismatch");
+        assert_eq!(e.kind, DbErrorKind::SectionChecksum);
+        assert_eq!(e.context, kind.name());
+        assert!(e.to_string().contains(kind.name()));
+    }
+}
+
+#[test]
+fn every_error_kind_has_a_message() {
+    use DbErrorKind::*;
+    let kinds = [
+        Truncated,
+        Magic,
+        Endian,
+        Version,
+        HeaderChecksum,
+        SectionChecksum,
+        Table,
+        OutOfBounds,
+        Alignment,
+        Overlap,
+        Missing,
+        Size,
+        Value,
+        HostEndian,
+    ];
+    for kind in kinds {
+        for k in SectionKind::ALL {
+            let e = DbError {
+                kind,
+                context: k.name(),
+                expected: 16,
+                found: 3,
+            };
+            check_message(&e);
+            let msg = e.to_string();
+            assert!(msg.len() > 10, "{kind:?}: {msg}");
+        }
+    }
+    // Errors are usable as `dyn Error`.
+    let e: &dyn core::error::Error = &DbError {
+        kind: Size,
+        context: "grid",
+        expected: 1,
+        found: 2,
+    };
+    assert!(e.to_string().contains("grid"));
+}
+
+// ---------------------------------------------------------------------------
+// Fuzz-like: mutated but re-encoded files
+// ---------------------------------------------------------------------------
+
+/// Values that tend to reach edge cases when written over a field.
+const INTERESTING: [u32; 14] = [
+    0,
+    1,
+    2,
+    3,
+    0xFF,
+    0xFFFF,
+    0x7FFF_FFFF,
+    0x8000_0000,
+    0xFFFF_FFFF,
+    0x7FC0_0000, // NaN
+    0x7F80_0000, // +inf
+    0xFF80_0000, // -inf
+    0x8000_0000, // -0.0
+    0x7149_F2CA, // 1e30
+];
+
+fn mutate(rng: &mut Prng, s: &mut Sections) {
+    let k = rng.below(s.len());
+    let v = &mut s[k].1;
+    match rng.below(8) {
+        0 | 1 if !v.is_empty() => {
+            let i = rng.below(v.len());
+            v[i] ^= 1 << rng.below(8);
+        }
+        2 if !v.is_empty() => {
+            let i = rng.below(v.len());
+            v[i] = rng.next_u64() as u8;
+        }
+        3 | 4 if v.len() >= 4 => {
+            let i = rng.below(v.len() / 4) * 4;
+            let x = INTERESTING[rng.below(INTERESTING.len())];
+            v[i..i + 4].copy_from_slice(&x.to_le_bytes());
+        }
+        5 if v.len() >= 8 => {
+            let n = 2 + rng.below(7);
+            let i = rng.below(v.len() - n + 1);
+            for b in &mut v[i..i + n] {
+                *b = rng.next_u64() as u8;
+            }
+        }
+        6 => {
+            // Grow or shrink a section by a word.
+            if rng.below(2) == 0 || v.len() < 4 {
+                v.extend_from_slice(&[0, 0, 0x80, 0x3F]);
+            } else {
+                let n = v.len() - 4;
+                v.truncate(n);
+            }
+        }
+        _ if v.len() >= 4 => {
+            // A small integer in a u32 field (counts, indices, sizes).
+            let i = rng.below(v.len() / 4) * 4;
+            let x = rng.below(600) as u32;
+            v[i..i + 4].copy_from_slice(&x.to_le_bytes());
+        }
+        _ => {}
+    }
+}
+
+/// Touches everything a validated database offers, and localizes a scan.
+fn exercise(db: &RefDb<&[u8]>, scans: &[Vec<f32>], scratch: &mut Vec<u8>) -> bool {
+    db.verify().expect("re-encoded files have valid checksums");
+    for k in SectionKind::ALL {
+        let _ = (db.section(k).len(), db.section_crc(k));
+    }
+    let _ = (
+        db.meta(),
+        db.params(),
+        db.frame(),
+        db.manifest().len(),
+        db.bytes().len(),
+    );
+    let (w, h) = db.grid_size();
+    let grid = db.grid();
+    let mut blocked = 0usize;
+    for cy in 0..h.min(64) {
+        for cx in 0..w.min(64) {
+            blocked += grid.blocked(cx, cy) as usize;
+        }
+    }
+    let _ = blocked;
+    let _ = crate::raycast::cast(&grid, w as f32 / 2.0, h as f32 / 2.0, 0.3, 1e3);
+    assert!(db.dist().len() as u64 == w as u64 * h as u64);
+    let n = db.site_count();
+    assert_eq!(db.sites().len(), n);
+    for i in 0..n + 2 {
+        let _ = (db.site(i), db.site_xy(i));
+        for &j in db.neighbors(i) {
+            assert!((j as usize) < n);
+        }
+        if i < n {
+            assert_eq!(db.scan(i).len(), db.params().sensor.beams as usize);
+            assert_eq!(db.hist(i).len(), db.params().hist_cells());
+        } else {
+            assert!(db.scan(i).is_empty() && db.hist(i).is_empty());
+        }
+    }
+    let p = db.params();
+    for i in 0..n + 1 {
+        for w in 0..p.win_count() + 1 {
+            for h in 0..p.win_headings as usize + 1 {
+                let wh = db.window_hist(i, w, h);
+                assert!(wh.is_empty() || wh.len() == p.win_cells());
+            }
+        }
+    }
+    let mut any_ok = false;
+    for ranges in scans {
+        let need = scratch_size(db.params(), ranges.len());
+        if scratch.len() < need {
+            scratch.resize(need, 0);
+        }
+        let scan = Scan::Ranges(RangeScan {
+            angle_min: -core::f32::consts::PI,
+            angle_increment: 2.0 * core::f32::consts::PI / ranges.len() as f32,
+            range_min: 0.05,
+            range_max: fixture::RANGE_MAX,
+            ranges,
+        });
+        if let Ok(l) = localize(db, &scan, scratch) {
+            any_ok = true;
+            assert!(l.candidates.len() <= db.params().nc_max as usize);
+            assert!((l.site as usize) < n);
+        }
+    }
+    any_ok
+}
+
+#[test]
+fn mutated_databases_never_panic() {
+    let mut rng = Prng::new(21);
+    let scans = [
+        fixture::full_scan_at(crate::Pose2::new(0.9, 2.8, 0.7), 90),
+        fixture::full_scan_at(crate::Pose2::new(3.5, 4.0, -1.0), 120),
+    ];
+    let mut scratch = Vec::new();
+    let (mut valid, mut localized) = (0, 0);
+    let mut kinds = std::collections::BTreeMap::new();
+    let base = fixture::sections();
+    for round in 0..2000 {
+        let mut s = base.clone();
+        for _ in 0..1 + round % 3 {
+            mutate(&mut rng, &mut s);
+        }
+        if known_overflow(&s[index_of(SectionKind::Params)].1) {
+            continue;
+        }
+        let bytes = fixture::encode(&s);
+        let buf = Aligned::new(&bytes);
+        match RefDb::new(buf.bytes()) {
+            Ok(db) => {
+                valid += 1;
+                let scan = &scans[round % scans.len()..][..1];
+                localized += exercise(&db, scan, &mut scratch) as usize;
+            }
+            Err(e) => {
+                check_message(&e);
+                *kinds.entry(format!("{:?}", e.kind)).or_insert(0) += 1;
+            }
+        }
+    }
+    std::eprintln!("mutations: {valid} accepted ({localized} localized), rejected: {kinds:?}");
+    assert!(valid > 500 && kinds.len() >= 3, "{valid} {kinds:?}");
+}
+
+#[test]
+fn the_unmutated_fixture_localizes_in_the_fuzz_harness() {
+    let bytes = tiny_db();
+    let buf = Aligned::new(&bytes);
+    let db = RefDb::new(buf.bytes()).unwrap();
+    let scans = [fixture::full_scan_at(crate::Pose2::new(0.9, 2.8, 0.7), 90)];
+    assert!(exercise(&db, &scans, &mut vec![]));
+}

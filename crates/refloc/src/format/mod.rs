@@ -98,8 +98,9 @@ pub enum SectionKind {
     Params = 2,
     /// Packed beam-stopping bits, `u32` words (see `raycast::BitGrid`).
     Grid = 3,
-    /// Distance to the nearest obstacle surface per cell, `u8`, unit
-    /// `resolution / DIST_STEPS_PER_CELL`, saturating at 255.
+    /// Signed distance from each cell centre to the nearest obstacle
+    /// surface (negative inside obstacles), `u8`: `(value - DIST_ZERO)`
+    /// steps of `resolution / DIST_STEPS_PER_CELL`, saturating at 0 and 255.
     Dist = 4,
     /// `site_count` [`SiteRecord`]s.
     Sites = 5,
@@ -114,11 +115,15 @@ pub enum SectionKind {
     /// Build manifest: UTF-8 JSON written by `mapc` (input hashes, options,
     /// version). Informational; the runtime never parses it.
     Manifest = 9,
+    /// Window histograms for partial fields of view: for each site, each used
+    /// width and each heading, `win_rho_bins * win_theta_bins` `f32`
+    /// normalized to sum 1 (empty when the database stores none).
+    Windows = 10,
 }
 
 impl SectionKind {
     /// All kinds, in file order.
-    pub const ALL: [SectionKind; 9] = [
+    pub const ALL: [SectionKind; 10] = [
         SectionKind::Meta,
         SectionKind::Params,
         SectionKind::Grid,
@@ -128,6 +133,7 @@ impl SectionKind {
         SectionKind::Scans,
         SectionKind::Hists,
         SectionKind::Manifest,
+        SectionKind::Windows,
     ];
 
     /// From the raw value, if known.
@@ -147,12 +153,34 @@ impl SectionKind {
             SectionKind::Scans => "scans",
             SectionKind::Hists => "hists",
             SectionKind::Manifest => "manifest",
+            SectionKind::Windows => "windows",
         }
     }
 }
 
 /// Distance-map quantization: this many steps per grid cell.
 pub const DIST_STEPS_PER_CELL: f32 = 8.0;
+
+/// Distance-map value that encodes a distance of 0 (a point on a surface):
+/// values below are inside obstacles (down to -4 cells), above in free space
+/// (up to ~27.9 cells).
+pub const DIST_ZERO: u8 = 32;
+
+/// Decodes a distance-map value to a signed distance in cells.
+#[inline]
+pub fn dist_cells(v: u8) -> f32 {
+    (v as f32 - DIST_ZERO as f32) / DIST_STEPS_PER_CELL
+}
+
+/// Encodes a signed distance in cells (saturating).
+#[inline]
+pub fn dist_encode(cells: f32) -> u8 {
+    let v = libm::roundf(cells * DIST_STEPS_PER_CELL) + DIST_ZERO as f32;
+    if v.is_nan() {
+        return 255;
+    }
+    v.clamp(0.0, 255.0) as u8
+}
 
 /// Map metadata.
 #[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
@@ -272,8 +300,24 @@ pub struct ParamsRecord {
     /// With vicinity selection, stop examining candidates once one reaches
     /// `M >= 4.5 * N_P * early_accept` (0 examines them all).
     pub early_accept: F32,
+    /// Partial field of view: widths (rad) of the stored window histograms,
+    /// 0 for an unused slot.
+    pub win_widths: [F32; 2],
+    /// Partial field of view: window headings per width (evenly spaced).
+    pub win_headings: U32,
+    /// Partial field of view: rho bins of a window histogram.
+    pub win_rho_bins: U32,
+    /// Partial field of view: theta bins of a window histogram.
+    pub win_theta_bins: U32,
+    /// With vicinity selection, also stop after this many candidates once one
+    /// passes the acceptance threshold.
+    pub early_min: U32,
+    /// Reject as ambiguous when a candidate with a clearly different pose
+    /// (over 1 m or 20 degrees away) scores at least this share of the best M
+    /// (0 disables).
+    pub ambiguity_ratio: F32,
     /// Zero.
-    pub reserved: [U32; 13],
+    pub reserved: [U32; 6],
 }
 
 /// The number of padding bytes that bring `len` to a multiple of [`SECTION_ALIGN`].

@@ -67,6 +67,25 @@ pub struct BuildOpts {
     /// Gauss-Newton refinement iterations against the map (0: off, as in the paper).
     #[arg(long)]
     pub refine_iters: Option<u32>,
+    /// SSM: tentative correspondences per input point (descriptor pruning).
+    #[arg(long)]
+    pub tentative_k: Option<u32>,
+    /// Most resampled points per scan (SSM and histograms).
+    #[arg(long)]
+    pub max_points: Option<u32>,
+    /// Stop examining candidates once one reaches M >= 4.5 N_P * ratio (0: examine all).
+    #[arg(long)]
+    pub early_accept: Option<f32>,
+    /// Window widths (degrees, ascending, at most two) stored for scans with a
+    /// partial field of view, or "none" for a 360-degree-only database.
+    #[arg(long, default_value = "180,270", value_name = "DEG,DEG")]
+    pub fov_windows: String,
+    /// Also stop after this many candidates once one passes the acceptance threshold.
+    #[arg(long)]
+    pub early_min: Option<u32>,
+    /// Reject as ambiguous when a clearly different pose scores at least this share of the best M (0: off).
+    #[arg(long)]
+    pub ambiguity_ratio: Option<f32>,
 }
 
 impl BuildOpts {
@@ -75,7 +94,10 @@ impl BuildOpts {
         BuildConfig {
             beams: self.beams,
             range_max: self.range_max,
-            sensor_offset: self.sensor_offset.map(|o| [o[0] as f32, o[1] as f32, o[2] as f32]).unwrap_or([0.0; 3]),
+            sensor_offset: self
+                .sensor_offset
+                .map(|o| [o[0] as f32, o[1] as f32, o[2] as f32])
+                .unwrap_or([0.0; 3]),
             unknown_blocks: !self.unknown_free,
             robot_radius: self.robot_radius,
             site_spacing: self.site_spacing.unwrap_or(d.site_spacing),
@@ -86,14 +108,34 @@ impl BuildOpts {
             accept_ratio: self.accept_ratio,
             selection: self.selection.clone(),
             refine_iters: self.refine_iters.unwrap_or(d.refine_iters),
+            tentative_k: self.tentative_k.unwrap_or(d.tentative_k),
+            max_points: self.max_points.unwrap_or(d.max_points),
+            early_accept: self.early_accept.unwrap_or(d.early_accept),
+            early_min: self.early_min.unwrap_or(d.early_min),
+            ambiguity_ratio: self.ambiguity_ratio.unwrap_or(d.ambiguity_ratio),
+            fov_windows_deg: if self.fov_windows.trim() == "none" {
+                Vec::new()
+            } else {
+                self.fov_windows
+                    .split(',')
+                    .filter_map(|t| t.trim().parse::<f32>().ok())
+                    .collect()
+            },
         }
     }
 }
 
 /// Loads a map given as YAML or image.
-pub fn load_map(map: &std::path::Path, resolution: Option<f64>, origin: Option<[f64; 3]>) -> Result<mapfile::MapSource, mapfile::MapError> {
+pub fn load_map(
+    map: &std::path::Path,
+    resolution: Option<f64>,
+    origin: Option<[f64; 3]>,
+) -> Result<mapfile::MapSource, mapfile::MapError> {
     let is_yaml = matches!(
-        map.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref(),
+        map.extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase())
+            .as_deref(),
         Some("yaml") | Some("yml")
     );
     if is_yaml {
@@ -108,19 +150,34 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     let cfg = a.opts.config();
     cfg.params().map_err(|e| input_err(anyhow::anyhow!(e)))?;
     let out = a.output.clone().unwrap_or_else(|| {
-        let stem = a.map.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "map".into());
+        let stem = a
+            .map
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "map".into());
         PathBuf::from(format!("{stem}.refdb"))
     });
     let sp = ui.stage("loading map");
     let src = load_map(&a.map, a.resolution, a.origin).map_err(input_err)?;
     sp.set_message("compiling");
-    let built = pipeline::build(&src, &cfg).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.map.display())))?;
+    let built = pipeline::build(&src, &cfg)
+        .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.map.display())))?;
     sp.set_message("writing");
-    let secs: Vec<_> = built.sections.iter().map(|(k, b)| (*k, b.as_slice())).collect();
-    let size = mapc::writer::write_refdb(&out, &secs).map_err(|e| fail_err(anyhow::anyhow!("{}: cannot write: {e}", out.display())))?;
+    let secs: Vec<_> = built
+        .sections
+        .iter()
+        .map(|(k, b)| (*k, b.as_slice()))
+        .collect();
+    let size = mapc::writer::write_refdb(&out, &secs)
+        .map_err(|e| fail_err(anyhow::anyhow!("{}: cannot write: {e}", out.display())))?;
     // Round-trip: the file we wrote must read back and verify.
     let db = crate::util::open_db(&out)?;
-    db.verify().map_err(|e| fail_err(anyhow::anyhow!("{}: written file does not verify: {e}", out.display())))?;
+    db.verify().map_err(|e| {
+        fail_err(anyhow::anyhow!(
+            "{}: written file does not verify: {e}",
+            out.display()
+        ))
+    })?;
     sp.finish_and_clear();
     if !ui.quiet {
         let g = &src.grid;
@@ -128,9 +185,25 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         let free = g.free_count();
         let gvd_len: f64 = built.gvd.edges.iter().map(|e| e.length_m).sum();
         eprintln!("mapc build {} -> {}", a.map.display(), out.display());
-        eprintln!("  grid           {} x {} cells at {:.3} m ({:.1} m x {:.1} m)", g.width, g.height, res, g.width as f64 * res, g.height as f64 * res);
-        eprintln!("  free area      {:.1} m^2 ({} cells)", free as f64 * res * res, free);
-        eprintln!("  GVD            {:.1} m, {} nodes, {} edges", gvd_len, built.gvd.nodes.len(), built.gvd.edges.len());
+        eprintln!(
+            "  grid           {} x {} cells at {:.3} m ({:.1} m x {:.1} m)",
+            g.width,
+            g.height,
+            res,
+            g.width as f64 * res,
+            g.height as f64 * res
+        );
+        eprintln!(
+            "  free area      {:.1} m^2 ({} cells)",
+            free as f64 * res * res,
+            free
+        );
+        eprintln!(
+            "  GVD            {:.1} m, {} nodes, {} edges",
+            gvd_len,
+            built.gvd.nodes.len(),
+            built.gvd.edges.len()
+        );
         eprintln!("  sites          {}", built.sites.len());
         eprintln!(
             "  coverage       {:.2}% of {} free cells (clearance >= 0.25 m) see a site within {:.0} m",
@@ -138,11 +211,21 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             built.coverage.considered,
             cfg.coverage_range
         );
-        eprintln!("  logistic w     [{:.3}, {:.3}, {:.3}] from {} pairs of {} simulated scans", built.fit.w[0], built.fit.w[1], built.fit.w[2], built.fit.samples, built.fit.queries);
+        eprintln!(
+            "  logistic w     [{:.3}, {:.3}, {:.3}] from {} pairs of {} simulated scans",
+            built.fit.w[0], built.fit.w[1], built.fit.w[2], built.fit.samples, built.fit.queries
+        );
         let t = &built.times;
-        eprintln!("  stages         edt {:.3} s, gvd {:.3} s, sites {:.3} s, compile {:.3} s", t.edt, t.gvd, t.sites, t.compile);
+        eprintln!(
+            "  stages         edt {:.3} s, gvd {:.3} s, sites {:.3} s, compile {:.3} s",
+            t.edt, t.gvd, t.sites, t.compile
+        );
         eprintln!("  build time     {:.2} s", t0.elapsed().as_secs_f64());
-        eprintln!("  file size      {} bytes ({:.2} MiB)", size, size as f64 / 1048576.0);
+        eprintln!(
+            "  file size      {} bytes ({:.2} MiB)",
+            size,
+            size as f64 / 1048576.0
+        );
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -37,7 +37,8 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             a.map.display()
         )));
     }
-    std::fs::create_dir_all(&a.out).map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.out.display())))?;
+    std::fs::create_dir_all(&a.out)
+        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.out.display())))?;
     let t0 = Instant::now();
     let src = load_map(&a.map, None, None).map_err(input_err)?;
     let opts = BuildOpts {
@@ -53,12 +54,27 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         accept_ratio: 0.5,
         selection: "vicinity".into(),
         refine_iters: None,
+        tentative_k: None,
+        max_points: None,
+        early_accept: None,
+        fov_windows: "180,270".into(),
+        early_min: None,
+        ambiguity_ratio: None,
     };
     let built = pipeline::build(&src, &opts.config()).map_err(|e| input_err(anyhow::anyhow!(e)))?;
-    let stem = a.map.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "map".into());
+    let stem = a
+        .map
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "map".into());
     let db_path = a.out.join(format!("{stem}.refdb"));
-    let secs: Vec<_> = built.sections.iter().map(|(k, b)| (*k, b.as_slice())).collect();
-    let size = mapc::writer::write_refdb(&db_path, &secs).map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", db_path.display())))?;
+    let secs: Vec<_> = built
+        .sections
+        .iter()
+        .map(|(k, b)| (*k, b.as_slice()))
+        .collect();
+    let size = mapc::writer::write_refdb(&db_path, &secs)
+        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", db_path.display())))?;
     let build_s = t0.elapsed().as_secs_f64();
     let eval_args = crate::eval::Args {
         db: db_path.clone(),
@@ -70,7 +86,12 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         range_max: 30.0,
         noise: 0.005,
         outliers: 60,
-        experiments: vec!["static".into(), "dynamic".into(), "dynamic-swap".into(), "e1".into()],
+        experiments: vec![
+            "static".into(),
+            "dynamic".into(),
+            "dynamic-swap".into(),
+            "e1".into(),
+        ],
         e1_trials: 100,
         e2_trials: 10,
         foreign: None,
@@ -81,12 +102,26 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         tol_false_accept: 0.01,
         tol_error_factor: 1.5,
     };
-    let quiet = Ui { quiet: true, tty: ui.tty };
+    let quiet = Ui {
+        quiet: true,
+        tty: ui.tty,
+    };
     let report = crate::eval::evaluate(&eval_args, &quiet)?;
     let rp = a.out.join("report.json");
-    std::fs::write(&rp, serde_json::to_string_pretty(&report).unwrap_or_default()).map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", rp.display())))?;
+    std::fs::write(
+        &rp,
+        serde_json::to_string_pretty(&report).unwrap_or_default(),
+    )
+    .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", rp.display())))?;
     let g = &src.grid;
-    println!("refloc demo: {} ({} x {} cells, {:.1} m x {:.1} m)", a.map.display(), g.width, g.height, g.width as f64 * g.resolution, g.height as f64 * g.resolution);
+    println!(
+        "refloc demo: {} ({} x {} cells, {:.1} m x {:.1} m)",
+        a.map.display(),
+        g.width,
+        g.height,
+        g.width as f64 * g.resolution,
+        g.height as f64 * g.resolution
+    );
     println!(
         "compiled {} sites, coverage {:.2}%, {} bytes in {:.2} s -> {}",
         built.sites.len(),
@@ -96,7 +131,10 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         db_path.display()
     );
     println!();
-    println!("{:<14} {:>6} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}", "scans", "n", "correct", "false acc", "|x| mm", "|y| mm", "|th| deg", "ms/query");
+    println!(
+        "{:<14} {:>6} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "scans", "n", "correct", "false acc", "|x| mm", "|y| mm", "|th| deg", "ms/query"
+    );
     if let Some(m) = report["summaries"].as_object() {
         for (name, s) in m {
             let f = |k: &str| s[k].as_f64().unwrap_or(f64::NAN);

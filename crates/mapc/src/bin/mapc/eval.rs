@@ -42,7 +42,11 @@ pub struct Args {
     #[arg(long, default_value_t = 60)]
     pub outliers: usize,
     /// Experiments to run, comma separated: static, dynamic, dynamic-swap, e1, e2, wrong-map.
-    #[arg(long, default_value = "static,dynamic,dynamic-swap,e1", value_delimiter = ',')]
+    #[arg(
+        long,
+        default_value = "static,dynamic,dynamic-swap,e1",
+        value_delimiter = ','
+    )]
     pub experiments: Vec<String>,
     /// E1 trials (paper: 500).
     #[arg(long, default_value_t = 500)]
@@ -93,18 +97,30 @@ fn fmt_summary(name: &str, s: &Summary) -> String {
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
     let report = evaluate(&a, ui)?;
-    std::fs::create_dir_all(&a.out).map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.out.display())))?;
+    std::fs::create_dir_all(&a.out)
+        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.out.display())))?;
     let path = a.out.join("report.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&report).unwrap_or_default())
-        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", path.display())))?;
+    std::fs::write(
+        &path,
+        serde_json::to_string_pretty(&report).unwrap_or_default(),
+    )
+    .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", path.display())))?;
     ui.note(&format!("report: {}", path.display()));
     if let Some(base) = &a.check {
-        let text = std::fs::read_to_string(base).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", base.display())))?;
-        let b: Value = serde_json::from_str(&text).map_err(|e| input_err(anyhow::anyhow!("{}: not a report: {e}", base.display())))?;
+        let text = std::fs::read_to_string(base)
+            .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", base.display())))?;
+        let b: Value = serde_json::from_str(&text)
+            .map_err(|e| input_err(anyhow::anyhow!("{}: not a report: {e}", base.display())))?;
         let parse = |v: &Value| -> Vec<(String, Summary)> {
             v["summaries"]
                 .as_object()
-                .map(|m| m.iter().filter_map(|(k, s)| Some((k.clone(), serde_json::from_value(s.clone()).ok()?))).collect())
+                .map(|m| {
+                    m.iter()
+                        .filter_map(|(k, s)| {
+                            Some((k.clone(), serde_json::from_value(s.clone()).ok()?))
+                        })
+                        .collect()
+                })
                 .unwrap_or_default()
         };
         let tol = Tolerance {
@@ -115,14 +131,20 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         };
         let base_s = parse(&b);
         if base_s.is_empty() {
-            return Err(input_err(anyhow::anyhow!("{}: baseline has no summaries", base.display())));
+            return Err(input_err(anyhow::anyhow!(
+                "{}: baseline has no summaries",
+                base.display()
+            )));
         }
         let regs = eval::check(&parse(&report), &base_s, &tol);
         if regs.is_empty() {
             println!("check: no regression against {} (tolerances: rate {:.3}, false-accept {:.3}, error x{:.2})", base.display(), tol.rate, tol.false_accept, tol.error_factor);
         } else {
             for r in &regs {
-                println!("REGRESSION {}: baseline {:.6}, now {:.6}, limit {:.6}", r.metric, r.baseline, r.current, r.limit);
+                println!(
+                    "REGRESSION {}: baseline {:.6}, now {:.6}, limit {:.6}",
+                    r.metric, r.baseline, r.current, r.limit
+                );
             }
             return Ok(ExitCode::from(1));
         }
@@ -135,7 +157,9 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
     let db = open_db(&a.db)?;
     let fov = a.fov.to_radians();
     if !(fov > 0.0 && fov <= 2.0 * std::f32::consts::PI + 1e-3) || a.beams < 3 {
-        return Err(input_err(anyhow::anyhow!("--fov must be in (0, 360] degrees and --beams at least 3")));
+        return Err(input_err(anyhow::anyhow!(
+            "--fov must be in (0, 360] degrees and --beams at least 3"
+        )));
     }
     let want = |e: &str| a.experiments.iter().any(|x| x == e);
     for e in &a.experiments {
@@ -153,7 +177,10 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
     };
     let poses = eval::sample_poses(&db, a.poses, a.clearance, a.seed);
     if poses.is_empty() {
-        return Err(input_err(anyhow::anyhow!("no free cell with clearance {} m to sample poses from", a.clearance)));
+        return Err(input_err(anyhow::anyhow!(
+            "no free cell with clearance {} m to sample poses from",
+            a.clearance
+        )));
     }
     let mut summaries: BTreeMap<String, Value> = BTreeMap::new();
     let mut report = json!({
@@ -181,23 +208,64 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
         if !a.no_figures {
             let _ = std::fs::create_dir_all(&a.out);
             let f = |n: &str| a.out.join(format!("{name}-{n}.png"));
-            let r = figures::poses_figure(&db, &trials, &format!("E4 {name}: true vs estimated poses"), 300, &f("poses"))
-                .and_then(|_| figures::error_figure(&trials, &format!("E4 {name}: pose errors (Fig. 12)"), &f("errors")))
-                .and_then(|_| figures::rank_figure(&trials, &format!("E5 {name}: coarse rank of the correct site (Fig. 16)"), &f("ranks")));
+            let r = figures::poses_figure(
+                &db,
+                &trials,
+                &format!("E4 {name}: true vs estimated poses"),
+                300,
+                &f("poses"),
+            )
+            .and_then(|_| {
+                figures::error_figure(
+                    &trials,
+                    &format!("E4 {name}: pose errors (Fig. 12)"),
+                    &f("errors"),
+                )
+            })
+            .and_then(|_| {
+                figures::rank_figure(
+                    &trials,
+                    &format!("E5 {name}: coarse rank of the correct site (Fig. 16)"),
+                    &f("ranks"),
+                )
+            });
             if let Err(e) = r {
                 ui.note(&format!("warning: figures not written: {e}"));
             }
         }
         let ranks: Vec<usize> = trials.iter().filter_map(|t| t.correct_rank).collect();
-        let within = |k: usize| ranks.iter().filter(|&&r| r < k).count() as f64 / ranks.len().max(1) as f64;
+        let within =
+            |k: usize| ranks.iter().filter(|&&r| r < k).count() as f64 / ranks.len().max(1) as f64;
         report[format!("e5_{name}")] = json!({
             "with_site_in_sight": ranks.len(),
             "rank_within": {"1": within(1), "5": within(5), "10": within(10), "20": within(20), "30": within(30)},
             "rank_histogram": (0..30).map(|k| ranks.iter().filter(|&&r| r == k).count()).collect::<Vec<_>>(),
         });
         let failures: Vec<&Trial> = trials.iter().filter(|t| !t.correct()).take(50).collect();
+        let ratios = |ok: bool| -> Vec<f64> {
+            let mut v: Vec<f64> = trials
+                .iter()
+                .filter(|t| t.est.is_some() && t.correct() == ok)
+                .map(|t| t.vicinity_ratio)
+                .collect();
+            v.sort_by(|a, b| a.total_cmp(b));
+            v
+        };
+        let (good, bad) = (ratios(true), ratios(false));
+        let pct = |v: &[f64], q: f64| {
+            v.get(((v.len() as f64 - 1.0) * q).round() as usize)
+                .copied()
+                .unwrap_or(f64::NAN)
+        };
+        report[format!("vicinity_{name}")] = json!({
+            "correct_p01_p05_p50": [pct(&good, 0.01), pct(&good, 0.05), pct(&good, 0.5)],
+            "wrong_p50_p95_p99_max": [pct(&bad, 0.5), pct(&bad, 0.95), pct(&bad, 0.99), bad.last().copied().unwrap_or(f64::NAN)],
+        });
         report[format!("failures_{name}")] = serde_json::to_value(&failures).unwrap_or(Value::Null);
-        summaries.insert(name.to_string(), serde_json::to_value(&s).unwrap_or(Value::Null));
+        summaries.insert(
+            name.to_string(),
+            serde_json::to_value(&s).unwrap_or(Value::Null),
+        );
         if name == "static" {
             static_trials = Some(trials);
         }
@@ -205,21 +273,43 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
     let _ = static_trials;
     if want("wrong-map") {
         let Some(fp) = &a.foreign else {
-            return Err(input_err(anyhow::anyhow!("wrong-map needs --foreign MAP.yaml")));
+            return Err(input_err(anyhow::anyhow!(
+                "wrong-map needs --foreign MAP.yaml"
+            )));
         };
         let src = crate::build::load_map(fp, None, None).map_err(input_err)?;
         let g = &src.grid;
         let bits = g.blocked_bits(true);
-        let bg = refloc::raycast::BitGrid::new(g.width, g.height, &bits).ok_or_else(|| input_err(anyhow::anyhow!("grid")))?;
+        let bg = refloc::raycast::BitGrid::new(g.width, g.height, &bits)
+            .ok_or_else(|| input_err(anyhow::anyhow!("grid")))?;
         let frame = g.frame();
         let df = mapc::edt::DistanceField::from_grid(g, true);
-        let fposes = eval::sample_poses_where(g.width, g.height, &frame, |i| df.clearance_m(i) >= a.clearance as f64, a.poses, a.seed ^ 0xF0);
+        let fposes = eval::sample_poses_where(
+            g.width,
+            g.height,
+            &frame,
+            |i| df.clearance_m(i) >= a.clearance as f64,
+            a.poses,
+            a.seed ^ 0xF0,
+        );
         let pb = ui.progress(fposes.len() as u64, "wrong-map");
         let tick = || pb.inc(1);
-        let trials = eval::run_e4(&db, &fposes, &spec(0.0, 0, 0), a.seed, Some((&bg, &frame)), &tick);
+        let trials = eval::run_e4(
+            &db,
+            &fposes,
+            &spec(0.0, 0, 0),
+            a.seed,
+            Some((&bg, &frame)),
+            &tick,
+        );
         pb.finish_and_clear();
         let accepted = trials.iter().filter(|t| t.accepted).count();
-        ui.note(&format!("wrong-map      n {:>5}  accepted {} ({:.2}%)", trials.len(), accepted, 100.0 * accepted as f64 / trials.len().max(1) as f64));
+        ui.note(&format!(
+            "wrong-map      n {:>5}  accepted {} ({:.2}%)",
+            trials.len(),
+            accepted,
+            100.0 * accepted as f64 / trials.len().max(1) as f64
+        ));
         // A wrong-map run has no correct answer: every acceptance is false.
         let s = Summary {
             n: trials.len(),
@@ -228,7 +318,10 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
             false_accept_rate: accepted as f64 / trials.len().max(1) as f64,
             ..Summary::default()
         };
-        summaries.insert("wrong-map".into(), serde_json::to_value(&s).unwrap_or(Value::Null));
+        summaries.insert(
+            "wrong-map".into(),
+            serde_json::to_value(&s).unwrap_or(Value::Null),
+        );
     }
     if want("e1") {
         let done = AtomicU64::new(0);
@@ -248,7 +341,13 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
             .collect();
         pb.finish_and_clear();
         let errs: Vec<[f64; 3]> = trials.iter().filter_map(|t| t.err).collect();
-        let good: Vec<[f64; 3]> = errs.iter().copied().filter(|e| (e[0].powi(2) + e[1].powi(2)).sqrt() < 0.3 && e[2].abs() < 5f64.to_radians()).collect();
+        let good: Vec<[f64; 3]> = errs
+            .iter()
+            .copied()
+            .filter(|e| {
+                (e[0].powi(2) + e[1].powi(2)).sqrt() < 0.3 && e[2].abs() < 5f64.to_radians()
+            })
+            .collect();
         let (m, sd) = eval::mean_sd(&good);
         ui.note(&format!(
             "e1             n {:>5}  matched {} ({} within 0.3 m / 5 deg)  x {:.2} ({:.2}) mm  y {:.2} ({:.2}) mm  th {:.3} ({:.3}) deg   [paper: 0.27 (10.51), -0.42 (7.99), 0.01 (0.09)]",
@@ -276,22 +375,55 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
                 .enumerate()
                 .map(|(k, p)| {
                     let mut r = Rng::stream(a.seed ^ tag, k as u64);
-                    eval::ssm_trial(&db, p, noise, outliers, 0.4, 30f32.to_radians(), &mut r).matching_rate
+                    eval::ssm_trial(&db, p, noise, outliers, 0.4, 30f32.to_radians(), &mut r)
+                        .matching_rate
                 })
                 .collect();
             rates.iter().sum::<f64>() / rates.len().max(1) as f64
         };
         let noises: Vec<f64> = (0..=10).map(|k| k as f64 * 5.0).collect();
-        let ra: Vec<f64> = noises.iter().enumerate().map(|(k, &n)| curve(n as f32 / 1000.0, 72, 0x2A00 + k as u64)).collect();
+        let ra: Vec<f64> = noises
+            .iter()
+            .enumerate()
+            .map(|(k, &n)| curve(n as f32 / 1000.0, 72, 0x2A00 + k as u64))
+            .collect();
         let ratios: Vec<f64> = (0..=10).map(|k| k as f64 * 0.1).collect();
         let n_in = db.params().sensor.beams as f64;
-        let rb: Vec<f64> = ratios.iter().enumerate().map(|(k, &r)| curve(0.005, (r * n_in) as usize, 0x2B00 + k as u64)).collect();
-        ui.note(&format!("e2 (a) noise mm {:?} -> rate {:?}", noises, ra.iter().map(|v| (v * 100.0).round() / 100.0).collect::<Vec<_>>()));
-        ui.note(&format!("e2 (b) outlier ratio {:?} -> rate {:?}", ratios, rb.iter().map(|v| (v * 100.0).round() / 100.0).collect::<Vec<_>>()));
+        let rb: Vec<f64> = ratios
+            .iter()
+            .enumerate()
+            .map(|(k, &r)| curve(0.005, (r * n_in) as usize, 0x2B00 + k as u64))
+            .collect();
+        ui.note(&format!(
+            "e2 (a) noise mm {:?} -> rate {:?}",
+            noises,
+            ra.iter()
+                .map(|v| (v * 100.0).round() / 100.0)
+                .collect::<Vec<_>>()
+        ));
+        ui.note(&format!(
+            "e2 (b) outlier ratio {:?} -> rate {:?}",
+            ratios,
+            rb.iter()
+                .map(|v| (v * 100.0).round() / 100.0)
+                .collect::<Vec<_>>()
+        ));
         if !a.no_figures {
             let _ = std::fs::create_dir_all(&a.out);
-            let _ = figures::curve_figure(&noises, &ra, "E2 (a): 72 outliers, rising noise (Fig. 6a)", "noise sigma (mm)", &a.out.join("e2-noise.png"));
-            let _ = figures::curve_figure(&ratios, &rb, "E2 (b): noise 5 mm, rising outliers (Fig. 6b)", "outlier / inlier ratio", &a.out.join("e2-outliers.png"));
+            let _ = figures::curve_figure(
+                &noises,
+                &ra,
+                "E2 (a): 72 outliers, rising noise (Fig. 6a)",
+                "noise sigma (mm)",
+                &a.out.join("e2-noise.png"),
+            );
+            let _ = figures::curve_figure(
+                &ratios,
+                &rb,
+                "E2 (b): noise 5 mm, rising outliers (Fig. 6b)",
+                "outlier / inlier ratio",
+                &a.out.join("e2-outliers.png"),
+            );
         }
         report["e2"] = json!({"noise_mm": noises, "rate_vs_noise": ra, "outlier_ratio": ratios, "rate_vs_outliers": rb, "trials_per_point": a.e2_trials});
     }

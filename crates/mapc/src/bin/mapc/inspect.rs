@@ -56,7 +56,8 @@ pub fn params_json(p: &refloc::Params) -> Value {
         "ransac_iters": p.ransac_iters, "ransac_threshold_m": p.ransac_threshold, "ransac_seed": p.ransac_seed,
         "min_inliers": p.min_inliers, "refine_iters": p.refine_iters, "refine_max_dist_m": p.refine_max_dist,
         "sigma_d_m": p.sigma_d, "accept_ratio": p.accept_ratio, "min_valid_points": p.min_valid_points,
-        "selection": format!("{:?}", p.selection), "early_accept": p.early_accept,
+        "selection": format!("{:?}", p.selection), "early_accept": p.early_accept, "early_min": p.early_min, "ambiguity_ratio": p.ambiguity_ratio,
+        "window_widths_rad": p.win_widths, "window_headings": p.win_headings, "window_rho_bins": p.win_rho_bins, "window_theta_bins": p.win_theta_bins,
         "scratch_bytes_362": refloc::scratch_size(p, 362), "scratch_bytes_1081": refloc::scratch_size(p, 1081),
     })
 }
@@ -89,7 +90,12 @@ pub fn info(a: InfoArgs) -> CliResult {
         return Ok(ExitCode::SUCCESS);
     }
     let m = db.meta();
-    println!("{}: refdb format v{}, {} bytes", a.db.display(), refloc::format::FORMAT_VERSION, db.bytes().len());
+    println!(
+        "{}: refdb format v{}, {} bytes",
+        a.db.display(),
+        refloc::format::FORMAT_VERSION,
+        db.bytes().len()
+    );
     println!(
         "grid      {} x {} cells, {:.3} m/cell, origin ({:.3}, {:.3}, {:.4} rad)",
         m.width.get(),
@@ -102,7 +108,12 @@ pub fn info(a: InfoArgs) -> CliResult {
     println!("sites     {}", db.site_count());
     println!("sections");
     for k in SectionKind::ALL {
-        println!("  {:<10} {:>10} bytes  crc32c {:08x}", k.name(), db.section(k).len(), db.section_crc(k));
+        println!(
+            "  {:<10} {:>10} bytes  crc32c {:08x}",
+            k.name(),
+            db.section(k).len(),
+            db.section_crc(k)
+        );
     }
     println!("params");
     if let Value::Object(p) = &j["params"] {
@@ -118,8 +129,14 @@ pub fn info(a: InfoArgs) -> CliResult {
 
 pub fn verify(a: VerifyArgs) -> CliResult {
     let db = open_db(&a.db)?;
-    db.verify().map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.db.display())))?;
-    println!("{}: ok ({} sites, {} bytes, all checksums match)", a.db.display(), db.site_count(), db.bytes().len());
+    db.verify()
+        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.db.display())))?;
+    println!(
+        "{}: ok ({} sites, {} bytes, all checksums match)",
+        a.db.display(),
+        db.site_count(),
+        db.bytes().len()
+    );
     Ok(ExitCode::SUCCESS)
 }
 
@@ -171,20 +188,38 @@ pub fn diff(a: DiffArgs) -> CliResult {
             moved.push(json!({"old": j, "new": i, "from": sa[j], "to": sb[i], "distance_m": d}));
         }
     }
-    let added: Vec<Value> = (0..sb.len()).filter(|&i| !used_b[i]).map(|i| json!({"site": i, "at": sb[i]})).collect();
-    let removed: Vec<Value> = (0..sa.len()).filter(|&j| !used_a[j]).map(|j| json!({"site": j, "at": sa[j]})).collect();
-    let same = changes.is_empty() && added.is_empty() && moved.is_empty() && removed.is_empty() && sa.len() == sb.len();
+    let added: Vec<Value> = (0..sb.len())
+        .filter(|&i| !used_b[i])
+        .map(|i| json!({"site": i, "at": sb[i]}))
+        .collect();
+    let removed: Vec<Value> = (0..sa.len())
+        .filter(|&j| !used_a[j])
+        .map(|j| json!({"site": j, "at": sa[j]}))
+        .collect();
+    let same = changes.is_empty()
+        && added.is_empty()
+        && moved.is_empty()
+        && removed.is_empty()
+        && sa.len() == sb.len();
     let report = json!({"identical_bytes": da.bytes() == db.bytes(), "same": same, "changes": changes,
         "sites": {"old": sa.len(), "new": sb.len(), "added": added, "removed": removed, "moved": moved}});
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&report).unwrap_or_default());
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report).unwrap_or_default()
+        );
     } else {
         println!("{} -> {}", a.a.display(), a.b.display());
         if da.bytes() == db.bytes() {
             println!("identical files");
         }
         for c in &changes {
-            println!("  changed {}: {} -> {}", c["what"].as_str().unwrap_or(""), c["old"], c["new"]);
+            println!(
+                "  changed {}: {} -> {}",
+                c["what"].as_str().unwrap_or(""),
+                c["old"],
+                c["new"]
+            );
         }
         println!(
             "  sites: {} -> {} ({} added, {} removed, {} moved)",
@@ -195,8 +230,17 @@ pub fn diff(a: DiffArgs) -> CliResult {
             moved.len()
         );
         for m in &moved {
-            println!("    moved site {} -> {}: {:.3} m", m["old"], m["new"], m["distance_m"].as_f64().unwrap_or(0.0));
+            println!(
+                "    moved site {} -> {}: {:.3} m",
+                m["old"],
+                m["new"],
+                m["distance_m"].as_f64().unwrap_or(0.0)
+            );
         }
     }
-    Ok(if same { ExitCode::SUCCESS } else { ExitCode::from(1) })
+    Ok(if same {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
 }

@@ -41,11 +41,18 @@ pub struct Args {
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
     let db = open_db(&a.db)?;
-    let fmt: InputFormat = a.input_format.parse().map_err(|e| input_err(anyhow::anyhow!("--input-format: {e}")))?;
+    let fmt: InputFormat = a
+        .input_format
+        .parse()
+        .map_err(|e| input_err(anyhow::anyhow!("--input-format: {e}")))?;
     let text = match a.format.as_str() {
         "json" => false,
         "text" => true,
-        other => return Err(input_err(anyhow::anyhow!("--format must be json or text, not '{other}'"))),
+        other => {
+            return Err(input_err(anyhow::anyhow!(
+                "--format must be json or text, not '{other}'"
+            )))
+        }
     };
     let opts = ReadOptions {
         fov: a.fov.map(|d| d.to_radians()),
@@ -59,15 +66,21 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             .collect(),
         None => HashMap::new(),
     };
-    let reader = scanio::open_input(&a.input).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.input)))?;
+    let reader =
+        scanio::open_input(&a.input).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.input)))?;
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     let mut scratch: Vec<u8> = Vec::new();
-    let (mut n, mut failed, mut accepted, mut correct, mut false_acc) = (0usize, 0usize, 0usize, 0usize, 0usize);
+    let (mut n, mut failed, mut accepted, mut correct, mut false_acc) =
+        (0usize, 0usize, 0usize, 0usize, 0usize);
     let mut errs: Vec<f64> = Vec::new();
     let mut times: Vec<f64> = Vec::new();
     if text {
-        let _ = writeln!(out, "{:<12} {:>4} {:>9} {:>9} {:>8} {:>6} {:>9} {:>8} {:>8} {:>8}", "id", "ok", "x_m", "y_m", "theta", "site", "E", "M", "M_thr", "time_ms");
+        let _ = writeln!(
+            out,
+            "{:<12} {:>4} {:>9} {:>9} {:>8} {:>6} {:>9} {:>8} {:>8} {:>8}",
+            "id", "ok", "x_m", "y_m", "theta", "site", "E", "M", "M_thr", "time_ms"
+        );
     }
     for (k, item) in scanio::read_scans(reader, fmt, &opts).enumerate() {
         n += 1;
@@ -76,7 +89,11 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             Err(e) => {
                 failed += 1;
                 let line = if text {
-                    format!("{:<12} error: {}", e.id.clone().unwrap_or_else(|| format!("line {}", e.line)), e.message)
+                    format!(
+                        "{:<12} error: {}",
+                        e.id.clone().unwrap_or_else(|| format!("line {}", e.line)),
+                        e.message
+                    )
                 } else {
                     json!({"id": e.id, "line": e.line, "error": e.message}).to_string()
                 };
@@ -112,7 +129,11 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         let time_us = t0.elapsed().as_micros() as u64;
         times.push(time_us as f64);
         // The truth index is the scan's position among the laser lines.
-        let scan_index = scan.id.strip_prefix("scan ").and_then(|s| s.parse().ok()).unwrap_or(k);
+        let scan_index = scan
+            .id
+            .strip_prefix("scan ")
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(k);
         let gt = truth.get(&scan_index).copied();
         match r {
             Ok(l) => {
@@ -120,7 +141,8 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                     accepted += 1;
                 }
                 let err = gt.map(|g| {
-                    let e = ((l.pose.x as f64 - g[0]).powi(2) + (l.pose.y as f64 - g[1]).powi(2)).sqrt();
+                    let e = ((l.pose.x as f64 - g[0]).powi(2) + (l.pose.y as f64 - g[1]).powi(2))
+                        .sqrt();
                     let et = refloc::wrap_angle(l.pose.theta - g[2] as f32).abs() as f64;
                     (e, et)
                 });
@@ -181,7 +203,11 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                 if text {
                     let _ = writeln!(out, "{:<12} {:>4} not localized: {e}", scan.id, "no");
                 } else {
-                    let _ = writeln!(out, "{}", json!({"id": scan.id, "accepted": false, "reason": e.to_string(), "time_us": time_us}));
+                    let _ = writeln!(
+                        out,
+                        "{}",
+                        json!({"id": scan.id, "accepted": false, "reason": e.to_string(), "time_us": time_us})
+                    );
                 }
             }
         }
@@ -190,7 +216,10 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     if !ui.quiet {
         times.sort_by(|a, b| a.total_cmp(b));
         let med_t = times.get(times.len() / 2).copied().unwrap_or(0.0);
-        eprintln!("{n} scans, {failed} unreadable, {accepted} accepted, median {:.1} ms/scan", med_t / 1000.0);
+        eprintln!(
+            "{n} scans, {failed} unreadable, {accepted} accepted, median {:.1} ms/scan",
+            med_t / 1000.0
+        );
         if !truth.is_empty() {
             errs.sort_by(|a, b| a.total_cmp(b));
             let med = errs.get(errs.len() / 2).copied().unwrap_or(f64::NAN);
@@ -204,5 +233,9 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             );
         }
     }
-    Ok(if failed > 0 { ExitCode::from(1) } else { ExitCode::SUCCESS })
+    Ok(if failed > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
 }

@@ -37,16 +37,26 @@ pub struct Args {
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
     let src = load_map(&a.map, a.resolution, a.origin).map_err(input_err)?;
-    let cfg = BuildOpts { fit_queries: 0, ..a.opts.clone() }.config();
-    let built = pipeline::build(&src, &cfg).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.map.display())))?;
+    let cfg = BuildOpts {
+        fit_queries: 0,
+        ..a.opts.clone()
+    }
+    .config();
+    let built = pipeline::build(&src, &cfg)
+        .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.map.display())))?;
     let g = &src.grid;
     let out = a.output.clone().unwrap_or_else(|| {
-        let stem = a.map.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "map".into());
+        let stem = a
+            .map
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "map".into());
         PathBuf::from(format!("build-artifacts/{stem}.png"))
     });
     if let Some(dir) = out.parent() {
         if !dir.as_os_str().is_empty() {
-            std::fs::create_dir_all(dir).map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", dir.display())))?;
+            std::fs::create_dir_all(dir)
+                .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", dir.display())))?;
         }
     }
     // Gray image, top row first.
@@ -69,9 +79,18 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         origin: g.origin,
     };
     let mut c = MapCanvas::with_long_side(&layer, a.size);
-    c.fill_cells(built.gvd.cells.iter().map(|&(x, y)| (x as i64, y as i64)), [170, 190, 255]);
+    c.fill_cells(
+        built.gvd.cells.iter().map(|&(x, y)| (x as i64, y as i64)),
+        [170, 190, 255],
+    );
     for e in &built.gvd.edges {
-        c.cell_polyline(e.cells.iter().map(|&(x, y)| (x as f64 + 0.5, y as f64 + 0.5)), 1.5, color::BLUE);
+        c.cell_polyline(
+            e.cells
+                .iter()
+                .map(|&(x, y)| (x as f64 + 0.5, y as f64 + 0.5)),
+            1.5,
+            color::BLUE,
+        );
     }
     for (i, s) in built.sites.iter().enumerate() {
         for &n in &s.neighbours {
@@ -95,7 +114,12 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         }
     }
     if let Some(k) = a.site {
-        let s = built.sites.get(k).ok_or_else(|| input_err(anyhow::anyhow!("--site {k}: the map has {} sites", built.sites.len())))?;
+        let s = built.sites.get(k).ok_or_else(|| {
+            input_err(anyhow::anyhow!(
+                "--site {k}: the map has {} sites",
+                built.sites.len()
+            ))
+        })?;
         let p = &built.params.sensor;
         let scan = &built.scans[k];
         for (b, r) in scan.iter().enumerate() {
@@ -107,22 +131,38 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             }
         }
         let hist = mapc::compile::scan_histogram(scan, &built.params);
-        let (rb, tb) = (built.params.hist_rho_bins as usize, built.params.hist_theta_bins as usize);
-        let chart = plot::heatmap(&hist, rb, tb, (-180.0, 180.0), (0.0, built.params.hist_rho_max as f64))
-            .title(&format!("PGR histogram of site {k} (Fig. 9)"))
-            .x_label("theta (deg)")
-            .y_label("rho (m)")
-            .colorbar_label("share of pairs");
+        let (rb, tb) = (
+            built.params.hist_rho_bins as usize,
+            built.params.hist_theta_bins as usize,
+        );
+        let chart = plot::heatmap(
+            &hist,
+            rb,
+            tb,
+            (-180.0, 180.0),
+            (0.0, built.params.hist_rho_max as f64),
+        )
+        .title(&format!("PGR histogram of site {k} (Fig. 9)"))
+        .x_label("theta (deg)")
+        .y_label("rho (m)")
+        .colorbar_label("share of pairs");
         let hp = out.with_file_name(format!(
             "{}-site{k}-hist.png",
-            out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
+            out.file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default()
         ));
-        chart.save_png(&hp).map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", hp.display())))?;
+        chart
+            .save_png(&hp)
+            .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", hp.display())))?;
         ui.note(&format!("histogram: {}", hp.display()));
     }
     c.title(&format!(
         "{}: GVD, graph and {} reference sites",
-        a.map.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+        a.map
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default(),
         built.sites.len()
     ));
     c.legend(
@@ -136,7 +176,8 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         Corner::TopRight,
     );
     c.scale_bar(Corner::BottomLeft);
-    c.save_png(&out).map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", out.display())))?;
+    c.save_png(&out)
+        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", out.display())))?;
     println!("{}", out.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -28,7 +28,12 @@ pub struct Args {
     #[arg(long, value_name = "X,Y,YAW", value_parser = parse_triple, allow_hyphen_values = true)]
     pub origin: Option<[f64; 3]>,
     /// Output directory.
-    #[arg(short, long, default_value = "build-artifacts/synth", value_name = "DIR")]
+    #[arg(
+        short,
+        long,
+        default_value = "build-artifacts/synth",
+        value_name = "DIR"
+    )]
     pub out: PathBuf,
     /// Map name (file stem) [default: <kind>-<width>x<height>-s<seed>].
     #[arg(long)]
@@ -36,22 +41,40 @@ pub struct Args {
 }
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
-    let kind: SynthKind = a.kind.parse().map_err(|e| input_err(anyhow::anyhow!("--kind: {e}")))?;
+    let kind: SynthKind = a
+        .kind
+        .parse()
+        .map_err(|e| input_err(anyhow::anyhow!("--kind: {e}")))?;
     if !(a.resolution.is_finite() && a.resolution > 0.0) {
-        return Err(input_err(anyhow::anyhow!("--resolution must be a positive number of metres per cell")));
+        return Err(input_err(anyhow::anyhow!(
+            "--resolution must be a positive number of metres per cell"
+        )));
     }
     if a.width as u64 * a.height as u64 > (1u64 << 31) {
-        return Err(input_err(anyhow::anyhow!("{} x {} cells is more than 2^31 cells", a.width, a.height)));
+        return Err(input_err(anyhow::anyhow!(
+            "{} x {} cells is more than 2^31 cells",
+            a.width,
+            a.height
+        )));
     }
     let mut opts = SynthOptions::new(kind, a.width, a.height);
     opts.resolution = a.resolution;
     opts.seed = a.seed;
     let t = std::time::Instant::now();
     let map = synth::generate(&opts);
-    let name = a.name.clone().unwrap_or_else(|| format!("{}-{}x{}-s{}", kind.as_str(), a.width, a.height, a.seed));
+    let name = a
+        .name
+        .clone()
+        .unwrap_or_else(|| format!("{}-{}x{}-s{}", kind.as_str(), a.width, a.height, a.seed));
     let (yaml, _) = synth::write_ros_map(&a.out, &name, &map, a.origin.unwrap_or([0.0; 3]))
         .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.out.display())))?;
-    ui.note(&format!("{} ({} x {} cells, {:.2} s)", yaml.display(), map.width, map.height, t.elapsed().as_secs_f64()));
+    ui.note(&format!(
+        "{} ({} x {} cells, {:.2} s)",
+        yaml.display(),
+        map.width,
+        map.height,
+        t.elapsed().as_secs_f64()
+    ));
     println!("{}", yaml.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -15,12 +15,18 @@ pub type CliResult = Result<std::process::ExitCode, CliError>;
 
 /// Bad input or usage: exit code 2.
 pub fn input_err(e: impl Into<anyhow::Error>) -> CliError {
-    CliError { error: e.into(), code: 2 }
+    CliError {
+        error: e.into(),
+        code: 2,
+    }
 }
 
 /// A failed run: exit code 1.
 pub fn fail_err(e: impl Into<anyhow::Error>) -> CliError {
-    CliError { error: e.into(), code: 1 }
+    CliError {
+        error: e.into(),
+        code: 1,
+    }
 }
 
 /// Terminal-aware output helpers.
@@ -44,9 +50,11 @@ impl Ui {
         }
         let pb = ProgressBar::new(len);
         pb.set_style(
-            ProgressStyle::with_template("{msg:>12} [{bar:40}] {pos}/{len} {elapsed_precise} eta {eta}")
-                .unwrap_or_else(|_| ProgressStyle::default_bar())
-                .progress_chars("=> "),
+            ProgressStyle::with_template(
+                "{msg:>12} [{bar:40}] {pos}/{len} {elapsed_precise} eta {eta}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
         );
         pb.set_message(what.to_string());
         pb
@@ -81,6 +89,8 @@ pub fn parse_triple(s: &str) -> Result<[f64; 3], String> {
     let v: Result<Vec<f64>, _> = s.split(',').map(|t| t.trim().parse::<f64>()).collect();
     match v {
         Ok(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Ok([v[0], v[1], v[2]]),
-        _ => Err(format!("expected three finite numbers 'x,y,yaw', got '{s}'")),
+        _ => Err(format!(
+            "expected three finite numbers 'x,y,yaw', got '{s}'"
+        )),
     }
 }
