@@ -39,6 +39,17 @@ pub fn write_atomic<T>(
         w.flush()?;
         out
     };
+    // The temporary file is created 0600; give the database the usual
+    // permissions of a new file (or keep those of the file it replaces).
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(path)
+            .map(|m| m.permissions().mode() & 0o777)
+            .unwrap_or(0o644);
+        tmp.as_file()
+            .set_permissions(std::fs::Permissions::from_mode(mode))?;
+    }
     tmp.as_file().sync_all()?;
     tmp.persist(path).map_err(|e| e.error)?;
     Ok(out)

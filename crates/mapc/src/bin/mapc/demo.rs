@@ -9,6 +9,7 @@ use std::time::Instant;
 use mapc::pipeline;
 
 use crate::build::{load_map, BuildOpts};
+use crate::util::outln;
 use crate::util::{fail_err, input_err, CliResult, Ui};
 
 /// The shipped demo map, relative to the repository root.
@@ -114,7 +115,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     )
     .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", rp.display())))?;
     let g = &src.grid;
-    println!(
+    outln!(
         "refloc demo: {} ({} x {} cells, {:.1} m x {:.1} m)",
         a.map.display(),
         g.width,
@@ -122,7 +123,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         g.width as f64 * g.resolution,
         g.height as f64 * g.resolution
     );
-    println!(
+    outln!(
         "compiled {} sites, coverage {:.2}%, {} bytes in {:.2} s -> {}",
         built.sites.len(),
         100.0 * built.coverage.fraction,
@@ -130,15 +131,22 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         build_s,
         db_path.display()
     );
-    println!();
-    println!(
+    outln!();
+    outln!(
         "{:<14} {:>6} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
-        "scans", "n", "correct", "false acc", "|x| mm", "|y| mm", "|th| deg", "ms/query"
+        "scans",
+        "n",
+        "correct",
+        "false acc",
+        "|x| mm",
+        "|y| mm",
+        "|th| deg",
+        "ms/query"
     );
     if let Some(m) = report["summaries"].as_object() {
         for (name, s) in m {
             let f = |k: &str| s[k].as_f64().unwrap_or(f64::NAN);
-            println!(
+            outln!(
                 "{:<14} {:>6} {:>9.1}% {:>9.1}% {:>10.1} {:>10.1} {:>10.2} {:>10.2}",
                 name,
                 s["n"],
@@ -152,13 +160,13 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         }
     }
     if let Some(e1) = report.get("e1") {
-        println!();
-        println!(
+        outln!();
+        outln!(
             "scan-to-scan SSM (E1, {} trials): sd x {:.2} mm, y {:.2} mm, theta {:.3} deg (paper: 10.51 mm, 7.99 mm, 0.09 deg)",
             e1["trials"], e1["sd_mm_mm_deg"][0].as_f64().unwrap_or(f64::NAN), e1["sd_mm_mm_deg"][1].as_f64().unwrap_or(f64::NAN), e1["sd_mm_mm_deg"][2].as_f64().unwrap_or(f64::NAN)
         );
     }
-    println!();
-    println!("figures and report in {}/", a.out.display());
+    outln!();
+    outln!("figures and report in {}/", a.out.display());
     Ok(ExitCode::SUCCESS)
 }

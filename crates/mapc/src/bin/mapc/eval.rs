@@ -11,6 +11,7 @@ use mapc::figures;
 use mapc::rng::Rng;
 use serde_json::{json, Value};
 
+use crate::util::outln;
 use crate::util::{fail_err, input_err, open_db, CliResult, Ui};
 
 #[derive(clap::Args, Debug, Clone)]
@@ -138,12 +139,15 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         }
         let regs = eval::check(&parse(&report), &base_s, &tol);
         if regs.is_empty() {
-            println!("check: no regression against {} (tolerances: rate {:.3}, false-accept {:.3}, error x{:.2})", base.display(), tol.rate, tol.false_accept, tol.error_factor);
+            outln!("check: no regression against {} (tolerances: rate {:.3}, false-accept {:.3}, error x{:.2})", base.display(), tol.rate, tol.false_accept, tol.error_factor);
         } else {
             for r in &regs {
-                println!(
+                outln!(
                     "REGRESSION {}: baseline {:.6}, now {:.6}, limit {:.6}",
-                    r.metric, r.baseline, r.current, r.limit
+                    r.metric,
+                    r.baseline,
+                    r.current,
+                    r.limit
                 );
             }
             return Ok(ExitCode::from(1));

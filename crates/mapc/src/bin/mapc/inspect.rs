@@ -7,6 +7,7 @@ use refloc::format::SectionKind;
 use refloc::RefDb;
 use serde_json::{json, Value};
 
+use crate::util::outln;
 use crate::util::{fail_err, open_db, CliResult};
 
 #[derive(clap::Args, Debug)]
@@ -86,17 +87,17 @@ pub fn info(a: InfoArgs) -> CliResult {
     let db = open_db(&a.db)?;
     let j = info_json(&db);
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&j).unwrap_or_default());
+        outln!("{}", serde_json::to_string_pretty(&j).unwrap_or_default());
         return Ok(ExitCode::SUCCESS);
     }
     let m = db.meta();
-    println!(
+    outln!(
         "{}: refdb format v{}, {} bytes",
         a.db.display(),
         refloc::format::FORMAT_VERSION,
         db.bytes().len()
     );
-    println!(
+    outln!(
         "grid      {} x {} cells, {:.3} m/cell, origin ({:.3}, {:.3}, {:.4} rad)",
         m.width.get(),
         m.height.get(),
@@ -105,24 +106,24 @@ pub fn info(a: InfoArgs) -> CliResult {
         m.origin_y.get(),
         m.origin_yaw.get()
     );
-    println!("sites     {}", db.site_count());
-    println!("sections");
+    outln!("sites     {}", db.site_count());
+    outln!("sections");
     for k in SectionKind::ALL {
-        println!(
+        outln!(
             "  {:<10} {:>10} bytes  crc32c {:08x}",
             k.name(),
             db.section(k).len(),
             db.section_crc(k)
         );
     }
-    println!("params");
+    outln!("params");
     if let Value::Object(p) = &j["params"] {
         for (k, v) in p {
-            println!("  {k:<22} {v}");
+            outln!("  {k:<22} {v}");
         }
     }
     if let Some(inp) = j["manifest"].get("input") {
-        println!("input     {}", inp);
+        outln!("input     {}", inp);
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -131,7 +132,7 @@ pub fn verify(a: VerifyArgs) -> CliResult {
     let db = open_db(&a.db)?;
     db.verify()
         .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.db.display())))?;
-    println!(
+    outln!(
         "{}: ok ({} sites, {} bytes, all checksums match)",
         a.db.display(),
         db.site_count(),
@@ -204,24 +205,24 @@ pub fn diff(a: DiffArgs) -> CliResult {
     let report = json!({"identical_bytes": da.bytes() == db.bytes(), "same": same, "changes": changes,
         "sites": {"old": sa.len(), "new": sb.len(), "added": added, "removed": removed, "moved": moved}});
     if a.json {
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&report).unwrap_or_default()
         );
     } else {
-        println!("{} -> {}", a.a.display(), a.b.display());
+        outln!("{} -> {}", a.a.display(), a.b.display());
         if da.bytes() == db.bytes() {
-            println!("identical files");
+            outln!("identical files");
         }
         for c in &changes {
-            println!(
+            outln!(
                 "  changed {}: {} -> {}",
                 c["what"].as_str().unwrap_or(""),
                 c["old"],
                 c["new"]
             );
         }
-        println!(
+        outln!(
             "  sites: {} -> {} ({} added, {} removed, {} moved)",
             sa.len(),
             sb.len(),
@@ -230,7 +231,7 @@ pub fn diff(a: DiffArgs) -> CliResult {
             moved.len()
         );
         for m in &moved {
-            println!(
+            outln!(
                 "    moved site {} -> {}: {:.3} m",
                 m["old"],
                 m["new"],

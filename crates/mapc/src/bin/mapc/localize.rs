@@ -73,6 +73,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     let mut scratch: Vec<u8> = Vec::new();
     let (mut n, mut failed, mut accepted, mut correct, mut false_acc) =
         (0usize, 0usize, 0usize, 0usize, 0usize);
+    let mut false_acc_truth_fits_worse = 0usize;
     let mut errs: Vec<f64> = Vec::new();
     let mut times: Vec<f64> = Vec::new();
     if text {
@@ -135,6 +136,49 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             .and_then(|s| s.parse().ok())
             .unwrap_or(k);
         let gt = truth.get(&scan_index).copied();
+        // How well the given truth pose itself explains the scan (M / max):
+        // a low value means the truth and the map disagree there.
+        let truth_fit = gt.map(|g| {
+            let sensor = refloc::Pose2::new(g[0] as f32, g[1] as f32, g[2] as f32)
+                .compose(&db.params().sensor.offset);
+            let (angles, ranges): (Vec<f32>, Vec<f32>) = match &scan.data {
+                ScanData::Ranges {
+                    angle_min,
+                    angle_increment,
+                    range_min,
+                    range_max,
+                    ranges,
+                } => (0..ranges.len())
+                    .map(|i| {
+                        let r = ranges[i];
+                        let ok = r.is_finite() && r >= *range_min && r <= *range_max;
+                        (
+                            angle_min + i as f32 * angle_increment,
+                            if ok { r } else { f32::INFINITY },
+                        )
+                    })
+                    .unzip(),
+                ScanData::Points { points, .. } => points
+                    .iter()
+                    .map(|p| (p[1].atan2(p[0]), p[0].hypot(p[1])))
+                    .unzip(),
+            };
+            let rmax = match &scan.data {
+                ScanData::Ranges { range_max, .. } | ScanData::Points { range_max, .. } => {
+                    *range_max
+                }
+            };
+            let v = refloc::verify::vicinity(
+                &db.grid(),
+                &db.frame(),
+                &sensor,
+                angles.into_iter().zip(ranges),
+                rmax,
+                db.params().sigma_d,
+                db.params().accept_ratio,
+            );
+            (v.score / (4.5 * v.pairs.max(1) as f32)) as f64
+        });
         match r {
             Ok(l) => {
                 if l.accepted {
@@ -153,6 +197,10 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                         errs.push(e);
                     } else if l.accepted {
                         false_acc += 1;
+                        let ours = (l.vicinity / (4.5 * l.valid_points.max(1) as f32)) as f64;
+                        if truth_fit.is_some_and(|t| t < ours - 0.2) {
+                            false_acc_truth_fits_worse += 1;
+                        }
                     }
                 }
                 if text {
@@ -194,6 +242,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                         o["truth"] = json!(gt);
                         o["error_m"] = json!(e);
                         o["error_rad"] = json!(et);
+                        o["truth_vicinity_ratio"] = json!(truth_fit);
                     }
                     let _ = writeln!(out, "{o}");
                 }
@@ -230,6 +279,9 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                 false_acc,
                 100.0 * false_acc as f64 / n.max(1) as f64,
                 med
+            );
+            eprintln!(
+                "  of the false accepts, {false_acc_truth_fits_worse} are where the given truth pose explains the scan much worse than the estimate (vicinity ratio lower by > 0.2): truth and map disagree there"
             );
         }
     }

@@ -10,6 +10,7 @@ use mapc::plot;
 use mapc::render::{color, Corner, MapCanvas, MapLayer, Mark};
 
 use crate::build::{load_map, BuildOpts};
+use crate::util::outln;
 use crate::util::{fail_err, input_err, parse_triple, CliResult, Ui};
 
 #[derive(clap::Args, Debug)]
@@ -178,6 +179,6 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     c.scale_bar(Corner::BottomLeft);
     c.save_png(&out)
         .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", out.display())))?;
-    println!("{}", out.display());
+    outln!("{}", out.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use mapc::synth::{self, SynthKind, SynthOptions};
 
+use crate::util::outln;
 use crate::util::{fail_err, input_err, parse_triple, CliResult, Ui};
 
 #[derive(clap::Args, Debug)]
@@ -75,6 +76,6 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         map.height,
         t.elapsed().as_secs_f64()
     ));
-    println!("{}", yaml.display());
+    outln!("{}", yaml.display());
     Ok(ExitCode::SUCCESS)
 }

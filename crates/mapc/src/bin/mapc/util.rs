@@ -1,5 +1,15 @@
 //! Shared CLI plumbing: errors with exit codes, progress, database opening.
 
+/// `println!` that ignores a closed stdout (e.g. `mapc info x | head`)
+/// instead of panicking.
+macro_rules! outln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($t)*);
+    }};
+}
+pub(crate) use outln;
+
 use std::io::IsTerminal;
 use std::path::Path;
 
