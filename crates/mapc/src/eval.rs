@@ -77,6 +77,8 @@ pub struct Trial {
     pub time_us: u64,
     /// Vicinity score as a share of its maximum, `M / (4.5 N_P)`.
     pub vicinity_ratio: f64,
+    /// Share of the beams longer than the map allows at the estimate.
+    pub long_ratio: f64,
     /// Error message when localization returned an error.
     pub error: Option<String>,
 }
@@ -464,12 +466,14 @@ pub fn run_e4<D: AsRef<[u8]> + Sync>(
                     nc: 0,
                     time_us,
                     vicinity_ratio: 0.0,
+                    long_ratio: 0.0,
                     error: None,
                 };
                 match r {
                     Ok(l) => {
                         trial.est = Some([l.pose.x as f64, l.pose.y as f64, l.pose.theta as f64]);
                         trial.accepted = l.accepted;
+                        trial.long_ratio = l.long_beams as f64 / l.valid_points.max(1) as f64;
                         // threshold = 4.5 N_P accept_ratio, so M / (4.5 N_P) = M / threshold * ratio.
                         if l.vicinity_threshold > 0.0 {
                             trial.vicinity_ratio = (l.vicinity / l.vicinity_threshold
@@ -600,7 +604,7 @@ pub fn ssm_trial<D: AsRef<[u8]>>(
     ssm::descriptors(&rp[..nr], &rt[..nr], params.desc_radius, &mut rd);
     let (mut tent, mut aff) = (
         vec![[0u16; 2]; nl],
-        vec![ssm::Affinity::default(); refloc::localize::AFFINITY_CAP],
+        vec![ssm::Affinity::default(); params.affinity_cap as usize],
     );
     let (mut x, mut y, mut order) = (vec![0f32; nl], vec![0f32; nl], vec![0u16; nl]);
     let (mut acc, mut flags) = (vec![[0u16; 2]; np], vec![0u8; 3 * np + nl]);

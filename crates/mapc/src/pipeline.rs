@@ -60,6 +60,8 @@ pub struct BuildConfig {
     pub early_min: u32,
     /// Ambiguity rejection ratio (0: off).
     pub ambiguity_ratio: f32,
+    /// Most stored SSM affinity entries (8 bytes of scratch each).
+    pub affinity_cap: u32,
 }
 
 impl Default for BuildConfig {
@@ -84,6 +86,7 @@ impl Default for BuildConfig {
             fov_windows_deg: vec![180.0, 270.0],
             early_min: Params::defaults(362, 30.0).early_min,
             ambiguity_ratio: Params::defaults(362, 30.0).ambiguity_ratio,
+            affinity_cap: Params::defaults(362, 30.0).affinity_cap,
         }
     }
 }
@@ -106,6 +109,7 @@ impl BuildConfig {
         p.early_accept = self.early_accept;
         p.early_min = self.early_min;
         p.ambiguity_ratio = self.ambiguity_ratio;
+        p.affinity_cap = self.affinity_cap;
         if self.fov_windows_deg.len() > 2 {
             return Err("at most two --fov-windows widths".into());
         }

@@ -36,6 +36,9 @@
 //! MSRV: 1.85.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![deny(missing_docs)]
+// `!(x < y)` is deliberate throughout: it is true for NaN, which untrusted
+// input must be able to produce without slipping past a check.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 #![cfg_attr(not(feature = "mmap"), forbid(unsafe_code))]
 #![cfg_attr(feature = "mmap", deny(unsafe_code))]
 

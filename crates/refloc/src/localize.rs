@@ -19,8 +19,9 @@ use crate::ssm::{self, Affinity, SsmWork, DESC_LEN};
 use crate::verify;
 use crate::Pose2;
 
-/// Most affinity entries stored per SSM run (8 bytes each).
-pub const AFFINITY_CAP: usize = 32 * 1024;
+/// The default of `Params::affinity_cap`: most affinity entries stored per
+/// SSM run (8 bytes each).
+pub const AFFINITY_CAP: usize = 16 * 1024;
 
 /// A laser scan as `sensor_msgs/LaserScan` ranges: beam `k` at angle
 /// `angle_min + k * angle_increment` (radians, sensor frame); ranges in
@@ -155,6 +156,12 @@ pub struct Candidate {
     pub vicinity_threshold: f32,
     /// 1 when SSM produced a pose, 0 otherwise.
     pub has_pose: u32,
+    /// Input beams shorter than the map predicts at this pose (see [`crate::verify::Vicinity`]).
+    pub short_beams: u32,
+    /// Input beams longer than the map allows at this pose.
+    pub long_beams: u32,
+    /// N_P: input beams with a return.
+    pub pairs: u32,
 }
 
 /// The answer for one scan.
@@ -185,6 +192,10 @@ pub struct Localization<'s> {
     pub ambiguous: bool,
     /// Valid input points.
     pub valid_points: u32,
+    /// Input beams shorter than the map predicts at the pose.
+    pub short_beams: u32,
+    /// Input beams longer than the map allows at the pose.
+    pub long_beams: u32,
     /// Every candidate examined, in coarse rank order.
     pub candidates: &'s [Candidate],
 }
@@ -198,6 +209,7 @@ struct Dims {
     hist: usize,
     cands: usize,
     tent: usize,
+    aff: usize,
 }
 
 impl Dims {
@@ -210,6 +222,7 @@ impl Dims {
             hist: params.hist_cells().max(params.win_cells()),
             cands: params.nc_max as usize,
             tent: points * params.tentative_k as usize,
+            aff: params.affinity_cap as usize,
         }
     }
 
@@ -237,10 +250,7 @@ impl Dims {
             u(self.points * DESC_LEN, f),
             u(self.points * DESC_LEN, f),
             u(self.tent, (size_of::<[u16; 2]>(), align_of::<[u16; 2]>())),
-            u(
-                AFFINITY_CAP,
-                (size_of::<Affinity>(), align_of::<Affinity>()),
-            ),
+            u(self.aff, (size_of::<Affinity>(), align_of::<Affinity>())),
             u(self.tent, f),
             u(self.tent, f),
             u(self.tent, (2, 2)),
@@ -345,7 +355,7 @@ pub fn localize<'s, D: AsRef<[u8]>>(
         qdesc: take!(f32, dims.points * DESC_LEN),
         rdesc: take!(f32, dims.points * DESC_LEN),
         tent: take!([u16; 2], dims.tent),
-        aff: take!(Affinity, AFFINITY_CAP),
+        aff: take!(Affinity, dims.aff),
         x: take!(f32, dims.tent),
         y: take!(f32, dims.tent),
         order: take!(u16, dims.tent),
@@ -459,6 +469,9 @@ pub fn localize<'s, D: AsRef<[u8]>>(
             cand.vicinity = v.score;
             cand.vicinity_threshold = v.threshold;
             cand.has_pose = 1;
+            cand.short_beams = v.short;
+            cand.long_beams = v.long;
+            cand.pairs = v.pairs;
             let better = match best {
                 None => true,
                 Some(b) => match params.selection {
@@ -469,8 +482,11 @@ pub fn localize<'s, D: AsRef<[u8]>>(
             if better {
                 best = Some(c);
             }
-            // Early stop (vicinity selection): a confident match, or enough
-            // candidates examined and an acceptable best.
+            // Early stop (vicinity selection): a confident match (the beams
+            // not blocked by something unmapped in front agree with the map
+            // almost perfectly, at most a fifth are blocked, and M passes the
+            // acceptance threshold), or enough candidates examined and an
+            // acceptable best.
             let best_m = best
                 .map(|b| {
                     if b == c {
@@ -482,7 +498,9 @@ pub fn localize<'s, D: AsRef<[u8]>>(
                 .unwrap_or(0.0);
             let done = params.selection == Selection::Vicinity
                 && params.early_accept > 0.0
-                && (best_m >= 4.5 * v.pairs as f32 * params.early_accept
+                && ((v.explained_ratio() >= params.early_accept
+                    && v.short * 5 <= v.pairs
+                    && v.score > v.threshold)
                     || (params.early_min > 0
                         && c + 1 >= params.early_min as usize
                         && best_m > v.threshold));
@@ -520,6 +538,8 @@ pub fn localize<'s, D: AsRef<[u8]>>(
         accepted: c.vicinity > c.vicinity_threshold && !ambiguous,
         ambiguous,
         valid_points: valid as u32,
+        short_beams: c.short_beams,
+        long_beams: c.long_beams,
         candidates: cands,
     })
 }

@@ -111,6 +111,8 @@ pub struct Params {
     pub early_min: u32,
     /// Ambiguity rejection ratio (0: off).
     pub ambiguity_ratio: f32,
+    /// Most stored affinity entries per SSM match (8 bytes each of scratch).
+    pub affinity_cap: u32,
 }
 
 impl Params {
@@ -159,6 +161,7 @@ impl Params {
             win_theta_bins: 12,
             early_min: 0,
             ambiguity_ratio: 0.97,
+            affinity_cap: 16 * 1024,
         }
     }
 
@@ -187,11 +190,15 @@ impl Params {
         }
         if !fin(s.angle_min)
             || !pos(s.angle_increment)
-            || s.angle_increment * s.beams as f32 > 6.2832 * 1.0001
+            || s.angle_increment * s.beams as f32 > core::f32::consts::TAU * 1.0001
         {
             return Err("angle_increment");
         }
-        if !pos(s.range_max) || !(s.range_min >= 0.0 && s.range_min < s.range_max) {
+        if !pos(s.range_max)
+            || s.range_min.is_nan()
+            || s.range_min < 0.0
+            || s.range_min >= s.range_max
+        {
             return Err("range_max/range_min");
         }
         if !(fin(s.offset.x) && fin(s.offset.y) && fin(s.offset.theta)) {
@@ -279,6 +286,9 @@ impl Params {
         {
             return Err("window histogram layout");
         }
+        if self.affinity_cap < 64 || self.affinity_cap > 1 << 20 {
+            return Err("affinity_cap");
+        }
         if !(self.ambiguity_ratio >= 0.0 && self.ambiguity_ratio <= 1.0) {
             return Err("ambiguity_ratio");
         }
@@ -342,6 +352,7 @@ impl Params {
             win_theta_bins: r.win_theta_bins.get(),
             early_min: r.early_min.get(),
             ambiguity_ratio: r.ambiguity_ratio.get(),
+            affinity_cap: r.affinity_cap.get(),
         })
     }
 
@@ -396,7 +407,8 @@ impl Params {
             win_theta_bins: U32::new(self.win_theta_bins),
             early_min: U32::new(self.early_min),
             ambiguity_ratio: F32::new(self.ambiguity_ratio),
-            reserved: [U32::new(0); 6],
+            affinity_cap: U32::new(self.affinity_cap),
+            reserved: [U32::new(0); 5],
         }
     }
 }

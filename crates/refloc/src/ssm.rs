@@ -339,7 +339,7 @@ pub fn pair_deformation(
     let dr = [rj[0] - ri[0], rj[1] - ri[1]];
     let (lq, lr) = (norm(dq), norm(dr));
     let drho = lq - lr;
-    if !(libm::fabsf(drho) < max_rho_dev) || !(lq > 0.0 && lr > 0.0) {
+    if !(libm::fabsf(drho) < max_rho_dev) || lq.is_nan() || lr.is_nan() || lq <= 0.0 || lr <= 0.0 {
         return None;
     }
     // cos of the angle difference at i (tangent u_i vs u_i') and at j (with -d).

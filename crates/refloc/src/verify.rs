@@ -20,6 +20,27 @@ pub struct Vicinity {
     pub threshold: f32,
     /// N_P: input beams with a return.
     pub pairs: u32,
+    /// Input beams shorter than the virtual beam by 3 sigma_d or more (or
+    /// with no virtual return): something not in the map is in front, as
+    /// people and clutter are. Beams *longer* than the map allows count
+    /// against the pose in M and are not counted here.
+    pub short: u32,
+    /// Input beams longer than the virtual beam by 3 sigma_d or more: the
+    /// scan sees through where the map has a surface.
+    pub long: u32,
+}
+
+impl Vicinity {
+    /// M over its maximum for the beams that are not short:
+    /// `M / (4.5 (N_P - short))`, 0 when every beam is short.
+    pub fn explained_ratio(&self) -> f32 {
+        let n = self.pairs.saturating_sub(self.short);
+        if n == 0 {
+            0.0
+        } else {
+            self.score / (4.5 * n as f32)
+        }
+    }
 }
 
 /// Scores `sensor` (map frame) for input beams given as (angle in the sensor
@@ -41,22 +62,34 @@ pub fn vicinity<G: Occupancy + ?Sized>(
     let inv = 1.0 / (2.0 * sigma_d * sigma_d);
     let mut m = 0.0f32;
     let mut n = 0u32;
+    let mut short = 0u32;
+    let mut long = 0u32;
     for (a, r) in beams {
         if !r.is_finite() {
             continue;
         }
         n += 1;
         let ang = frame.angle_to_cells(sensor.theta + a);
-        if let Some(t) = cast(grid, uv[0], uv[1], ang, max_cells) {
-            let d = libm::fabsf(t * frame.resolution - r);
-            if d < lim {
-                m += 4.5 - d * d * inv;
+        match cast(grid, uv[0], uv[1], ang, max_cells) {
+            Some(t) => {
+                let v = t * frame.resolution;
+                let d = libm::fabsf(v - r);
+                if d < lim {
+                    m += 4.5 - d * d * inv;
+                } else if r < v {
+                    short += 1;
+                } else {
+                    long += 1;
+                }
             }
+            None => short += 1,
         }
     }
     Vicinity {
         score: m,
         threshold: 4.5 * n as f32 * accept_ratio,
         pairs: n,
+        short,
+        long,
     }
 }

@@ -297,8 +297,10 @@ pub struct ParamsRecord {
     pub min_valid_points: U32,
     /// Site selection: 0 largest matching score E (paper), 1 largest vicinity score.
     pub selection: U32,
-    /// With vicinity selection, stop examining candidates once one reaches
-    /// `M >= 4.5 * N_P * early_accept` (0 examines them all).
+    /// With vicinity selection, stop examining candidates once one explains
+    /// its non-short beams this well: `M >= 4.5 * (N_P - short) *
+    /// early_accept` with at most a fifth of the beams short (see
+    /// `verify::Vicinity::explained_ratio`; 0 examines them all).
     pub early_accept: F32,
     /// Partial field of view: widths (rad) of the stored window histograms,
     /// 0 for an unused slot.
@@ -316,8 +318,11 @@ pub struct ParamsRecord {
     /// (over 1 m or 20 degrees away) scores at least this share of the best M
     /// (0 disables).
     pub ambiguity_ratio: F32,
+    /// SSM: most stored affinity entries per match (8 bytes each in the
+    /// scratch; the main term of `scratch_size`).
+    pub affinity_cap: U32,
     /// Zero.
-    pub reserved: [U32; 6],
+    pub reserved: [U32; 5],
 }
 
 /// The number of padding bytes that bring `len` to a multiple of [`SECTION_ALIGN`].

@@ -86,6 +86,9 @@ pub struct BuildOpts {
     /// Reject as ambiguous when a clearly different pose scores at least this share of the best M (0: off).
     #[arg(long)]
     pub ambiguity_ratio: Option<f32>,
+    /// Most stored SSM affinity entries per match (8 bytes of robot RAM each; the main part of the scratch).
+    #[arg(long)]
+    pub affinity_cap: Option<u32>,
 }
 
 impl BuildOpts {
@@ -113,6 +116,7 @@ impl BuildOpts {
             early_accept: self.early_accept.unwrap_or(d.early_accept),
             early_min: self.early_min.unwrap_or(d.early_min),
             ambiguity_ratio: self.ambiguity_ratio.unwrap_or(d.ambiguity_ratio),
+            affinity_cap: self.affinity_cap.unwrap_or(d.affinity_cap),
             fov_windows_deg: if self.fov_windows.trim() == "none" {
                 Vec::new()
             } else {

@@ -61,6 +61,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         fov_windows: "180,270".into(),
         early_min: None,
         ambiguity_ratio: None,
+        affinity_cap: None,
     };
     let built = pipeline::build(&src, &opts.config()).map_err(|e| input_err(anyhow::anyhow!(e)))?;
     let stem = a

@@ -261,6 +261,18 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
                 .copied()
                 .unwrap_or(f64::NAN)
         };
+        let mut longs: Vec<f64> = trials
+            .iter()
+            .filter(|t| t.correct())
+            .map(|t| t.long_ratio)
+            .collect();
+        longs.sort_by(|a, b| a.total_cmp(b));
+        report[format!("long_ratio_correct_{name}")] = json!([
+            pct(&longs, 0.5),
+            pct(&longs, 0.95),
+            pct(&longs, 0.99),
+            longs.last().copied()
+        ]);
         report[format!("vicinity_{name}")] = json!({
             "correct_p01_p05_p50": [pct(&good, 0.01), pct(&good, 0.05), pct(&good, 0.5)],
             "wrong_p50_p95_p99_max": [pct(&bad, 0.5), pct(&bad, 0.95), pct(&bad, 0.99), bad.last().copied().unwrap_or(f64::NAN)],
@@ -308,6 +320,14 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
         );
         pb.finish_and_clear();
         let accepted = trials.iter().filter(|t| t.accepted).count();
+        report["accepted_wrong_map"] = serde_json::to_value(
+            trials
+                .iter()
+                .filter(|t| t.accepted)
+                .take(50)
+                .collect::<Vec<_>>(),
+        )
+        .unwrap_or(Value::Null);
         ui.note(&format!(
             "wrong-map      n {:>5}  accepted {} ({:.2}%)",
             trials.len(),

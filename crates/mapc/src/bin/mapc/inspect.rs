@@ -57,7 +57,7 @@ pub fn params_json(p: &refloc::Params) -> Value {
         "ransac_iters": p.ransac_iters, "ransac_threshold_m": p.ransac_threshold, "ransac_seed": p.ransac_seed,
         "min_inliers": p.min_inliers, "refine_iters": p.refine_iters, "refine_max_dist_m": p.refine_max_dist,
         "sigma_d_m": p.sigma_d, "accept_ratio": p.accept_ratio, "min_valid_points": p.min_valid_points,
-        "selection": format!("{:?}", p.selection), "early_accept": p.early_accept, "early_min": p.early_min, "ambiguity_ratio": p.ambiguity_ratio,
+        "selection": format!("{:?}", p.selection), "early_accept": p.early_accept, "early_min": p.early_min, "ambiguity_ratio": p.ambiguity_ratio, "affinity_cap": p.affinity_cap,
         "window_widths_rad": p.win_widths, "window_headings": p.win_headings, "window_rho_bins": p.win_rho_bins, "window_theta_bins": p.win_theta_bins,
         "scratch_bytes_362": refloc::scratch_size(p, 362), "scratch_bytes_1081": refloc::scratch_size(p, 1081),
     })

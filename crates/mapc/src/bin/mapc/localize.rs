@@ -226,7 +226,8 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                         "site": l.site, "coarse_rank": l.coarse_rank, "gamma": l.gamma,
                         "match_score": l.match_score, "inliers": l.inliers,
                         "vicinity": l.vicinity, "vicinity_threshold": l.vicinity_threshold,
-                        "valid_points": l.valid_points, "time_us": time_us,
+                        "valid_points": l.valid_points, "short_beams": l.short_beams, "long_beams": l.long_beams,
+                        "ambiguous": l.ambiguous, "time_us": time_us,
                     });
                     if a.no_candidates {
                         o["candidates"] = json!(l.candidates.len());
