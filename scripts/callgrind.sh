@@ -18,7 +18,10 @@
 #    allocate the scratch; the second also localizes N of them (query i =
 #    scan i mod 50, one thread). Instructions per query =
 #    (Ir(N) - Ir(0)) / N, so loading and simulation are excluded. N should be
-#    a multiple of 50 (default 50: every scan once);
+#    a multiple of 50 (default 50: every scan once). A third run with
+#    --dump-after gives each query's own count: their median, 90th
+#    percentile and maximum are printed too (a few queries that examine
+#    many candidates make the mean much larger than the median);
 # 3. with --profile, also runs the N queries of each set with collection
 #    switched on only inside refloc::localize::localize and prints the
 #    functions that take the most instructions (inclusive and self, per
@@ -42,7 +45,7 @@ while [ $# -gt 0 ]; do
         --conditions) CONDITIONS=$2; shift ;;
         --profile) PROFILE=1 ;;
         --keep) KEEP=1 ;;
-        -h | --help) sed -n '2,30p' "$0"; exit 0 ;;
+        -h | --help) sed -n '2,32p' "$0"; exit 0 ;;
         *) echo "unknown option $1" >&2; exit 2 ;;
     esac
     shift
@@ -80,15 +83,37 @@ count() { # count NAME ARGS...
     sed -n 's/^summary: *//p' "$WORK/$name.out"
 }
 
+# Each query's own count: with --dump-after, callgrind writes a profile part
+# after every return from localize; with N+1 queries, parts 2..N+1 hold
+# queries 1..N alone (part 1 also holds the set-up and query 0; query N is
+# scan N mod 50 again, so with N = 50 every scan appears once).
+each() { # each NAME ARGS... -> "median p90 max" of the per-query counts
+    local name=$1
+    shift
+    rm -f "$WORK/$name.out"*
+    valgrind --tool=callgrind --callgrind-out-file="$WORK/$name.out" \
+        --dump-after='*localize::localize*' "$@" >"$WORK/$name.log" 2>&1 ||
+        { cat "$WORK/$name.log" >&2; die "valgrind run $name failed"; }
+    for k in $(seq 2 $((N + 1))); do
+        sed -n 's/^totals: *//p' "$WORK/$name.out.$k"
+    done | sort -n | awk '{ a[NR] = $1 }
+        END { i = int(0.9 * (NR - 1) + 0.5) + 1
+              printf "%d %d %d\n", (a[int((NR + 1) / 2)] + a[int(NR / 2) + 1]) / 2, a[i], a[NR] }'
+}
+
 echo "valgrind: $(valgrind --version); N = $N queries per set"
-printf '%-9s %-8s %15s %15s %14s\n' beams cond "Ir(N)" "Ir(0)" "Ir/query"
+echo "Ir/query = (Ir(N) - Ir(0)) / N; median / p90 / max: each query's own count"
+printf '%-6s %-8s %14s %14s %12s %12s %12s %12s\n' beams cond "Ir(N)" "Ir(0)" "Ir/query" \
+    median p90 max
 for b in $BEAMS; do
     for c in $CONDITIONS; do
         base=$(count "$b-$c-0" "$BIN" --db "$DB" --beams "$b" --condition "$c" --n 0)
         full=$(count "$b-$c-$N" "$BIN" --db "$DB" --beams "$b" --condition "$c" --n "$N")
         per=$(( (full - base) / N ))
-        printf '%-9s %-8s %15d %15d %14d  (%.1f M)\n' "$b" "$c" "$full" "$base" "$per" \
-            "$(awk -v p="$per" 'BEGIN { print p / 1e6 }')"
+        read -r med p90 max < <(each "$b-$c-each" "$BIN" --db "$DB" --beams "$b" \
+            --condition "$c" --n $((N + 1)))
+        printf '%-6s %-8s %14d %14d %12d %12d %12d %12d\n' "$b" "$c" "$full" "$base" "$per" \
+            "$med" "$p90" "$max"
     done
 done
 
@@ -103,13 +128,26 @@ if [ "$PROFILE" = 1 ]; then
             total=$(sed -n 's/^summary: *//p' "$WORK/$name.out")
             echo
             echo "== $b beams, $c: instructions inside refloc::localize, per query (total $(( total / N )))"
-            # Inclusive: callgrind_annotate lists a function's whole inclusive
-            # cost on its line carrying the [object] suffix; the other lines
-            # of the same function are inlined fragments.
+            # Inlined code makes callgrind_annotate list a function once per
+            # source file its code comes from; dropping the inlined-file
+            # switches (fi=/fe=) gives one line per function, and a correct
+            # inclusive cost.
+            awk -f - "$WORK/$name.out" "$WORK/$name.out" >"$WORK/$name.merged" <<'AWK'
+NR == FNR {
+    if (match($0, /^(fl|fi|fe|cfi|cfl)=\([0-9]+\) /)) {
+        id = substr($0, 1, RLENGTH - 1); sub(/^[a-z]+=/, "", id)
+        name[id] = substr($0, RLENGTH + 1)
+    }
+    next
+}
+/^(fi|fe)=/ { next }
+/^(fl|cfi|cfl)=\([0-9]+\)$/ { k = $0; sub(/^[a-z]+=/, "", k); print $0 " " name[k]; next }
+{ print }
+AWK
             echo "-- inclusive (function and what it calls)"
-            callgrind_annotate --auto=no --inclusive=yes "$WORK/$name.out" 2>/dev/null |
+            callgrind_annotate --auto=no --inclusive=yes "$WORK/$name.merged" 2>/dev/null |
                 awk -v n="$N" -v t="$total" '
-                    /^ *[0-9,]+ \(/ && / \[.*\]$/ {
+                    /^ *[0-9,]+ \(/ && /:/ {
                         ir = $1; gsub(",", "", ir)
                         f = $0; sub(/ \[[^]]*\]$/, "", f); sub(/^[^:]*:/, "", f)
                         if (f !~ /^(refloc|libm)::/ || f ~ /^refloc::localize::localize$/) next
@@ -118,7 +156,7 @@ if [ "$PROFILE" = 1 ]; then
                     END { for (f in seen) printf "%12.0f %5.1f%%  %s\n", seen[f] / n, 100 * seen[f] / t, f }' |
                 sort -rn | head -20
             echo "-- self (instructions in the function body, inlined code included)"
-            callgrind_annotate --auto=no --inclusive=no "$WORK/$name.out" 2>/dev/null |
+            callgrind_annotate --auto=no --inclusive=no "$WORK/$name.merged" 2>/dev/null |
                 awk -v n="$N" -v t="$total" '
                     /^ *[0-9,]+ \(/ && /:/ {
                         ir = $1; gsub(",", "", ir)

@@ -15,6 +15,7 @@
 # and save it under tests/fuzz/<target>/ with a test in tests/fuzz_regressions.rs.
 #
 # Builds use -a (debug assertions, so integer overflow panics) and ASan.
+# fuzz/dict/<target>.dict, when present, is passed as a libFuzzer dictionary.
 # libFuzzer limits: -rss_limit_mb=2048 (also the largest single allocation),
 # -timeout=$FUZZ_TIMEOUT seconds per input (default 60).
 #
@@ -70,6 +71,7 @@ for t in "${targets[@]}"; do
     log="$fuzz/target/logs/$t.log"
     mkdir -p "$fuzz/artifacts/$t"
     before=$(find "$fuzz/artifacts/$t" -type f | wc -l)
+    start=$SECONDS
     if [[ $replay == 1 ]]; then
         echo "fuzz.sh: replaying corpus/$t" >&2
         cargo +nightly fuzz run -a "$t" "corpus/$t" -- \
@@ -79,18 +81,28 @@ for t in "${targets[@]}"; do
         work="$fuzz/target/corpus-work/$t"
         mkdir -p "$work"
         echo "fuzz.sh: fuzzing $t for ${seconds}s (log: ${log#"$root"/})" >&2
+        dict=()
+        [[ -f "$fuzz/dict/$t.dict" ]] && dict=(-dict="$fuzz/dict/$t.dict")
         cargo +nightly fuzz run -a "$t" "$work" "corpus/$t" -- \
             -max_total_time="$seconds" -rss_limit_mb=2048 -timeout="$timeout_s" \
-            -print_final_stats=1 >"$log" 2>&1
+            -print_final_stats=1 "${dict[@]}" >"$log" 2>&1
         rc=$?
     fi
     after=$(find "$fuzz/artifacts/$t" -type f | wc -l)
-    # libFuzzer's last status line: "#N  DONE  cov: ... exec/s: X rss: ...".
+    # libFuzzer's last status line: "#N  DONE  cov: ... exec/s: X rss: ..."
+    # (or the last "#N  NEW/pulse ..." line before a crash), then
+    # "Done N runs in T second(s)" and, with -print_final_stats, the
+    # "stat::number_of_executed_units" / "stat::average_exec_per_sec" lines.
     last=$(grep -E '^#[0-9]+' "$log" | tail -1)
-    execs=$(sed -nE 's/^#([0-9]+).*/\1/p' <<<"$last")
-    rate=$(sed -nE 's/.*exec\/s: ([0-9]+).*/\1/p' <<<"$last")
+    execs=$(sed -nE 's/^stat::number_of_executed_units: *([0-9]+).*/\1/p' "$log" | tail -1)
+    [[ -n "$execs" ]] || execs=$(sed -nE 's/^#([0-9]+).*/\1/p' <<<"$last")
+    rate=$(sed -nE 's/^stat::average_exec_per_sec: *([0-9]+).*/\1/p' "$log" | tail -1)
+    [[ -n "$rate" ]] || rate=$(sed -nE 's/.*exec\/s: ([0-9]+).*/\1/p' <<<"$last")
     cov=$(sed -nE 's/.*cov: ([0-9]+).*/\1/p' <<<"$last")
     secs=$(sed -nE 's/^Done [0-9]+ runs in ([0-9]+) second.*/\1/p' "$log" | tail -1)
+    # Without "Done" (a crash), the wall time of the run (build excluded
+    # when it was already up to date).
+    [[ -n "$secs" ]] || secs=$((SECONDS - start))
     status="ok"
     if [[ $rc != 0 || $after -gt $before ]]; then
         status="FAILED (exit $rc)"

@@ -60,7 +60,7 @@ fn summary(db: &Db<'_>, sets: &[(Kind, Condition, Vec<Query>)]) {
         "\nper-query times, single thread, fastest of 3 runs per query, {SCAN_COUNT} queries per set:"
     );
     println!(
-        "{:<18} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10} {:>8} {:>9} {:>8} {:>6}",
+        "{:<18} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8} {:>6} {:>6} {:>6} {:>8} {:>7} {:>6} {:>6}",
         "set",
         "median",
         "p90",
@@ -68,10 +68,13 @@ fn summary(db: &Db<'_>, sets: &[(Kind, Condition, Vec<Query>)]) {
         "mean",
         "min",
         "examined",
+        "max",
+        "=1",
         "N_C",
         "accepted",
         "correct",
-        "M/max"
+        "M/max",
+        "expl."
     );
     for (kind, cond, qs) in sets {
         let st = query_stats(db, qs, 3);
@@ -79,7 +82,7 @@ fn summary(db: &Db<'_>, sets: &[(Kind, Condition, Vec<Query>)]) {
         let n = st.len().max(1) as f64;
         let mean = t.iter().sum::<Duration>() / st.len().max(1) as u32;
         println!(
-            "{:<18} {:>7.2}ms {:>7.2}ms {:>7.2}ms {:>7.2}ms {:>7.2}ms {:>10.1} {:>8.1} {:>9} {:>8} {:>6.3}",
+            "{:<18} {:>7.2}ms {:>7.2}ms {:>7.2}ms {:>7.2}ms {:>7.2}ms {:>8.1} {:>6} {:>6} {:>6.1} {:>8} {:>7} {:>6.3} {:>6.3}",
             format!("{}/{}", kind.name(), cond.name()),
             ms(median(&t)),
             ms(quantile(&t, 0.9)),
@@ -87,16 +90,20 @@ fn summary(db: &Db<'_>, sets: &[(Kind, Condition, Vec<Query>)]) {
             ms(mean),
             ms(quantile(&t, 0.0)),
             st.iter().map(|s| s.examined as f64).sum::<f64>() / n,
+            st.iter().map(|s| s.examined).max().unwrap_or(0),
+            st.iter().filter(|s| s.examined == 1).count(),
             st.iter().map(|s| s.nc as f64).sum::<f64>() / n,
             st.iter().filter(|s| s.accepted).count(),
             st.iter().filter(|s| s.correct).count(),
             st.iter().map(|s| s.vicinity_ratio as f64).sum::<f64>() / n,
+            st.iter().map(|s| s.explained_ratio as f64).sum::<f64>() / n,
         );
     }
     println!(
-        "(examined: candidates the fine stage ran, mean; N_C: coarse candidate count, mean; \
-         M/max: the answer's vicinity score over its maximum 4.5 N_P, mean; \
-         the early stop needs M/max >= early_accept = {})\n",
+        "(examined: candidates the fine stage ran, mean and max; =1: queries that stopped at the \
+         first candidate; N_C: coarse candidate count, mean; \
+         M/max: the answer's vicinity score M / (4.5 N_P), mean; expl.: M / (4.5 (N_P - short beams)), \
+         mean; the early stop needs expl. >= early_accept = {} with at most N_P/5 short beams)\n",
         db.params().early_accept
     );
 }

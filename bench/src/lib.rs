@@ -23,7 +23,6 @@ use mapc::rng::Rng;
 use mapc::sim::{self, Lidar};
 use mapc::synth::{self, SynthKind, SynthOptions};
 use refloc::coarse::{self, Ranked};
-use refloc::localize::AFFINITY_CAP;
 use refloc::refine::DistMap;
 use refloc::ssm::{self, Affinity, SsmResult, SsmWork, DESC_LEN};
 use refloc::verify::{self, Vicinity};
@@ -342,7 +341,7 @@ impl SsmBufs {
             qdesc: vec![0.0; np * DESC_LEN],
             rdesc: vec![0.0; np * DESC_LEN],
             tent: vec![[0; 2]; nl],
-            aff: vec![Affinity::default(); AFFINITY_CAP],
+            aff: vec![Affinity::default(); params.affinity_cap as usize],
             x: vec![0.0; nl],
             y: vec![0.0; nl],
             order: vec![0; nl],
@@ -547,9 +546,13 @@ pub struct QueryStat {
     pub accepted: bool,
     /// Accepted within 0.3 m and 5 degrees of the truth.
     pub correct: bool,
-    /// The answer's vicinity score as a share of its maximum, `M / (4.5 N_P)`
-    /// (the early stop needs `early_accept`, 0.9 by default).
+    /// The answer's vicinity score as a share of its maximum, `M / (4.5 N_P)`.
     pub vicinity_ratio: f32,
+    /// The same over the beams that are not short (blocked by something
+    /// unmapped), `M / (4.5 (N_P - short))`: the localizer stops early when
+    /// this reaches `early_accept` (0.9 by default) with at most a fifth of
+    /// the beams short.
+    pub explained_ratio: f32,
 }
 
 /// Localizes every query `reps` times (single thread) and keeps each one's
@@ -577,18 +580,28 @@ pub fn query_stats<D: AsRef<[u8]>>(db: &RefDb<D>, qs: &[Query], reps: usize) -> 
                             l.accepted
                                 && (dp as f64) < eval::CORRECT_POS
                                 && (dt as f64) < eval::CORRECT_THETA,
-                            if l.vicinity_threshold > 0.0 {
-                                l.vicinity / l.vicinity_threshold * db.params().accept_ratio
-                            } else {
-                                0.0
+                            {
+                                let pairs = l
+                                    .candidates
+                                    .iter()
+                                    .find(|c| c.rank == l.coarse_rank)
+                                    .map_or(0, |c| c.pairs);
+                                let ratio = |n: u32| {
+                                    if n > 0 {
+                                        l.vicinity / (4.5 * n as f32)
+                                    } else {
+                                        0.0
+                                    }
+                                };
+                                (ratio(pairs), ratio(pairs.saturating_sub(l.short_beams)))
                             },
                         )
                     }
-                    Err(_) => (0, false, false, 0.0),
+                    Err(_) => (0, false, false, (0.0, 0.0)),
                 });
             }
-            let (examined, accepted, correct, vicinity_ratio) =
-                out.unwrap_or((0, false, false, 0.0));
+            let (examined, accepted, correct, (vicinity_ratio, explained_ratio)) =
+                out.unwrap_or((0, false, false, (0.0, 0.0)));
             let nc = candidates(db, q, &mut work).len();
             QueryStat {
                 time: best,
@@ -597,6 +610,7 @@ pub fn query_stats<D: AsRef<[u8]>>(db: &RefDb<D>, qs: &[Query], reps: usize) -> 
                 accepted,
                 correct,
                 vicinity_ratio,
+                explained_ratio,
             }
         })
         .collect()

@@ -172,7 +172,11 @@ impl Params {
 
     /// Cells of a window histogram.
     pub fn win_cells(&self) -> usize {
-        self.win_rho_bins as usize * self.win_theta_bins as usize
+        // Unused when no width is stored; bounded by validate() otherwise.
+        if self.win_count() == 0 {
+            return 0;
+        }
+        (self.win_rho_bins as usize).saturating_mul(self.win_theta_bins as usize)
     }
 
     /// Number of used window widths (the used slots come first).
