@@ -20,6 +20,8 @@
 # Idempotent: inputs are regenerated only when they change. Exit status 0
 # on success, 1 on a failed check, 2 on a setup error.
 set -euo pipefail
+# These builds use the per-workspace target directories this script reads from.
+unset CARGO_TARGET_DIR
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 FW=$ROOT/examples/firmware
