@@ -114,8 +114,7 @@ pub fn scan_histogram(ranges: &[f32], params: &Params) -> Vec<f32> {
     );
     let p = params.max_points as usize;
     let (mut pts, mut tan) = (vec![[0f32; 2]; p], vec![[0f32; 2]; p]);
-    let wrap =
-        s.angle_increment * s.beams as f32 >= 2.0 * std::f32::consts::PI - 1.5 * s.angle_increment;
+    let wrap = prep::covers_full_turn(s.angle_increment, s.beams as usize);
     let m = prep::prepare(&dense[..n], wrap, params, &mut pts, &mut tan);
     let mut h = vec![0f32; params.hist_cells()];
     pgr::histogram(&pts[..m], &tan[..m], params, &mut h);

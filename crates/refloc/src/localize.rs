@@ -400,8 +400,7 @@ pub fn localize<'s, D: AsRef<[u8]>>(
     // 3. Fine: SSM against each candidate, refine, verify.
     ssm::descriptors(q_pts, q_tan, params.desc_radius, work.qdesc);
     let s = &params.sensor;
-    let ref_wrap =
-        s.angle_increment * s.beams as f32 >= 2.0 * core::f32::consts::PI - 1.5 * s.angle_increment;
+    let ref_wrap = prep::covers_full_turn(s.angle_increment, s.beams as usize);
     let dm = DistMap {
         width: db.grid_size().0,
         height: db.grid_size().1,
@@ -600,7 +599,7 @@ fn load_scan(
                 }
             }
             let fov = (libm::fabsf(inc) * n as f32).min(2.0 * PI);
-            let wrap = libm::fabsf(inc) * n as f32 >= 2.0 * PI - 1.5 * libm::fabsf(inc);
+            let wrap = prep::covers_full_turn(inc, n);
             Ok((valid, fov, wrap, r.range_max))
         }
         Scan::Points { points, range_max } => {

@@ -13,6 +13,14 @@ const TANGENT_REACH: usize = 6;
 /// Tangent stretch half-length (m).
 const TANGENT_RADIUS: f32 = 0.25;
 
+/// True when `beams` beams `angle_increment` radians apart close a full turn
+/// (to within one and a half beams), so the last beam neighbours the first.
+#[inline]
+pub fn covers_full_turn(angle_increment: f32, beams: usize) -> bool {
+    let inc = libm::fabsf(angle_increment);
+    inc * beams as f32 >= 2.0 * core::f32::consts::PI - 1.5 * inc
+}
+
 /// True when consecutive beam points `a`, `b` lie on different surfaces.
 #[inline]
 pub fn is_jump(a: [f32; 2], b: [f32; 2], jump_distance: f32) -> bool {
