@@ -231,21 +231,105 @@ fn refdb_unused_window_layout_keeps_scratch_size_sane() {
 
 /// `tests/fuzz/mapfile/png-rgba16-header-4gib-alloc`: a 64 KB PNG whose
 /// IHDR claims 23000 x 23000 pixels of 16-bit RGBA, followed by a cut-off
-/// IDAT. It is within `MAX_SIDE`/`MAX_CELLS`, and passes
-/// `minimum_file_bytes` (which allows 1032:1 deflate of 1 bit per pixel), so
-/// `load_pixels` lets the image crate reserve `width * height * 8` bytes
-/// (`max_alloc` is set to exactly that plus 64 MiB) before any pixel data is
-/// read: 4.2 GB for a 64 KB file (libFuzzer: `out-of-memory
-/// (malloc(4232000000))`). A 262 KB file of the same kind at 46000 x 46000
-/// asks for 16.9 GB; where that cannot be reserved, the process aborts
-/// (the allocation is infallible), it does not return `MapError`.
+/// IDAT. It is within `MAX_SIDE`/`MAX_CELLS`, and passed the old
+/// `minimum_file_bytes` (which allowed 1032:1 deflate of 1 bit per pixel),
+/// so `load_pixels` let the image crate reserve `width * height * 8` bytes
+/// before any pixel data was read: 4.2 GB for a 64 KB file (libFuzzer:
+/// `out-of-memory (malloc(4232000000))`).
+///
+/// Fixed in `mapc::mapfile`: the lower bound on the file size uses the bits
+/// per pixel the IHDR declares (colour type x bit depth: 64 here, so at
+/// least 4.1 MB), and the pixel buffer is allocated fallibly by the loader.
 #[test]
-#[ignore = "bug: mapc::mapfile::load_pixels bounds a PNG only by 1 bit/pixel at 1032:1 deflate while the decoder reserves width*height*bytes_per_pixel (up to 8) first: a 64 KB PNG header makes it allocate 4.2 GB"]
 fn mapfile_png_header_cannot_reserve_gigabytes() {
-    replay(
-        &finding("mapfile", "png-rgba16-header-4gib-alloc"),
-        harness::mapfile,
+    let path = finding("mapfile", "png-rgba16-header-4gib-alloc");
+    replay(&path, harness::mapfile);
+    // The image part of the harness input (after the YAML part).
+    let data = read(&path);
+    let sep = harness::MAP_SEPARATOR;
+    let at = data
+        .windows(sep.len())
+        .position(|w| w == sep)
+        .expect("a YAML part and an image part");
+    let dir = tempfile::tempdir().unwrap();
+    let image = dir.path().join("map.png");
+    std::fs::write(&image, &data[at + sep.len()..]).unwrap();
+    LARGEST.with(|c| c.set(0));
+    let e = mapc::mapfile::load_image(&image, Some(0.05), None).unwrap_err();
+    assert!(
+        matches!(e, mapc::mapfile::MapError::ImageDecode { .. })
+            && e.to_string()
+                .contains("truncated: the header claims 23000 x 23000"),
+        "{e}"
     );
+    let largest = LARGEST.with(Cell::get);
+    assert!(largest < 1 << 20, "one allocation of {largest} bytes");
+}
+
+/// The bound behind the fix above, for the worst PNG kinds: a file of
+/// `len` bytes whose IHDR claims the largest square image `len` can hold at
+/// deflate's best ratio (1032:1) makes the loader allocate at most the
+/// decoded buffer of that image, i.e. no more than 1032 x (decoded bits per
+/// pixel / raw bits per pixel) x `len` (32 x for a 1-bit palette with
+/// transparency, expanded to RGBA) plus the decoders' 64 MiB of working
+/// memory. Each file then fails as cut off, with a `MapError`.
+#[test]
+fn mapfile_png_allocation_is_bounded_by_the_file_size() {
+    use mapc::testdata::png::chunk;
+    let dir = tempfile::tempdir().unwrap();
+    let image = dir.path().join("map.png");
+    // (colour type, bit depth, raw bits per pixel, decoded bytes per pixel)
+    for (colour, depth, bits, out) in [
+        (3u8, 1u8, 1u64, 4u64), // palette + tRNS -> RGBA8
+        (3, 1, 1, 3),           // palette -> RGB8
+        (0, 1, 1, 1),
+        (0, 16, 16, 2),
+        (6, 16, 64, 8),
+    ] {
+        for len in [11_000u64, 64_000] {
+            let side = ((len * 1032 * 8 / bits) as f64).sqrt() as u32;
+            let mut f = b"\x89PNG\r\n\x1a\n".to_vec();
+            let mut ihdr = side.to_be_bytes().to_vec();
+            ihdr.extend_from_slice(&side.to_be_bytes());
+            ihdr.extend_from_slice(&[depth, colour, 0, 0, 0]);
+            chunk(&mut f, b"IHDR", &ihdr);
+            if colour == 3 {
+                chunk(&mut f, b"PLTE", &[0, 0, 0, 255, 255, 255]);
+                if out == 4 {
+                    chunk(&mut f, b"tRNS", &[255, 0]);
+                }
+            }
+            chunk(&mut f, b"IDAT", &[0x78, 0x9c]);
+            chunk(&mut f, b"IEND", &[]);
+            f.resize(len as usize, 0);
+            std::fs::write(&image, &f).unwrap();
+            LARGEST.with(|c| c.set(0));
+            let r =
+                std::panic::catch_unwind(|| mapc::mapfile::load_image(&image, Some(0.05), None));
+            let largest = LARGEST.with(Cell::get);
+            let what = format!("colour {colour} depth {depth}, {side} x {side} in {len} bytes");
+            let e = r
+                .unwrap_or_else(|_| panic!("{what}: panicked"))
+                .unwrap_err();
+            assert!(
+                matches!(e, mapc::mapfile::MapError::ImageDecode { .. }),
+                "{what}: {e}"
+            );
+            let decoded = side as u64 * side as u64 * out;
+            assert!(
+                decoded <= 1032 * 8 * out / bits * len,
+                "{what}: the header claims more than the bound allows"
+            );
+            assert!(
+                largest as u64 <= decoded + (64 << 20),
+                "{what}: one allocation of {largest} bytes, decoded size {decoded}"
+            );
+            assert!(
+                largest as u64 <= 33_024 * len + (64 << 20),
+                "{what}: {largest} bytes"
+            );
+        }
+    }
 }
 
 /// `tests/fuzz/scanio/angle-min-f32-rounds-past-limit`: one JSON record with
@@ -256,7 +340,6 @@ fn mapfile_png_header_cannot_reserve_gigabytes() {
 /// finite angle within [-2 pi, 2 pi] rad"), against the round trip
 /// documented on `scan_to_json`.
 #[test]
-#[ignore = "bug: mapc::scanio check_angles validates angle_min/angle_increment as f64 but the scan keeps them as f32; near the limits the f32 value fails the same check, so scan_to_json output does not read back"]
 fn scanio_angle_min_near_the_limit_round_trips() {
     replay(
         &finding("scanio", "angle-min-f32-rounds-past-limit"),
@@ -270,7 +353,6 @@ fn scanio_angle_min_near_the_limit_round_trips() {
 /// the JSON record written for the scan does not read back. Same cause as
 /// above.
 #[test]
-#[ignore = "bug: mapc::scanio check_angles checks the span with the f64 increment, the scan keeps the f32 one; scan_to_json output of such a scan does not read back"]
 fn scanio_increment_near_a_full_turn_round_trips() {
     replay(
         &finding("scanio", "increment-f32-rounds-past-full-turn"),

@@ -509,27 +509,16 @@ pub fn sensor_pose<D: AsRef<[u8]>>(db: &RefDb<D>, site: usize, m: &SsmResult) ->
 /// Stage "refine": `refine::refine` of `sensor` with the database's settings.
 pub fn refine<D: AsRef<[u8]>>(db: &RefDb<D>, q: &Query, sensor: Pose2) -> Pose2 {
     let p = db.params();
-    let (width, height) = db.grid_size();
-    let dm = DistMap {
-        width,
-        height,
-        data: db.dist(),
-        frame: db.frame(),
-    };
+    let dm = DistMap::of(db);
     refloc::refine::refine(&dm, &q.dense, sensor, p.refine_iters, p.refine_max_dist).0
 }
 
 /// Stage "verify": the vicinity score of `sensor`.
 pub fn verify<D: AsRef<[u8]>>(db: &RefDb<D>, q: &Query, sensor: &Pose2) -> Vicinity {
-    let p = db.params();
-    verify::vicinity(
-        &db.grid(),
-        &db.frame(),
+    let grid = db.grid();
+    verify::Verifier::new(db, &grid, q.lidar.range_max).score(
         sensor,
         q.angles.iter().copied().zip(q.valid_ranges.iter().copied()),
-        q.lidar.range_max,
-        p.sigma_d,
-        p.accept_ratio,
     )
 }
 

@@ -201,8 +201,42 @@ pub fn dist_section(sq_out: &[f32], sq_in: &[f32]) -> Vec<u8> {
         .collect()
 }
 
+/// `f(scan)` for every scan, `per` values each, as little-endian bytes in
+/// scan order, written straight into the section: a large map's per-site
+/// vectors are never held next to their serialized copy.
+fn per_scan_bytes(
+    scans: &[Vec<f32>],
+    per: usize,
+    f: impl Fn(&[f32]) -> Vec<f32> + Sync,
+) -> Vec<u8> {
+    let mut out = vec![0u8; scans.len() * per * 4];
+    if per == 0 {
+        return out;
+    }
+    out.par_chunks_mut(per * 4)
+        .zip(scans.par_iter())
+        .for_each(|(bytes, s)| {
+            let v = f(s);
+            assert_eq!(v.len(), per, "per-site section record of the wrong length");
+            for (b, x) in bytes.chunks_exact_mut(4).zip(&v) {
+                b.copy_from_slice(&x.to_le_bytes());
+            }
+        });
+    out
+}
+
 /// Compiles everything but the manifest, which the caller appends.
 pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, String> {
+    compile_with(input, sites, &mut |_| {})
+}
+
+/// As [`compile`], calling `lap(step)` at the end of each step
+/// ("compile.scans", "compile.fit", ...) so that the caller can time them.
+pub fn compile_with(
+    input: &CompileInput<'_>,
+    sites: &[SiteIn],
+    lap: &mut dyn FnMut(&'static str),
+) -> Result<Compiled, String> {
     let mut params = input.params;
     params
         .validate()
@@ -215,7 +249,19 @@ pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, S
     let grid = BitGrid::new(input.width, input.height, input.blocked)
         .ok_or("grid bits shorter than the grid")?;
     let frame = input.frame;
+    // The distance map first, before any per-site data exists: its distance
+    // transform needs 12 bytes per cell while it runs (peak memory).
+    let dist_bytes = {
+        let bits = grid;
+        let (w, h) = (input.width as usize, input.height as usize);
+        let sq_in = crate::edt::squared_edt(w, h, |i| {
+            !refloc::raycast::Occupancy::blocked(&bits, (i % w) as u32, (i / w) as u32)
+        });
+        dist_section(input.sq_dist, &sq_in)
+    };
+    lap("compile.dist");
     let scans = reference_scans(&grid, &frame, sites, &params);
+    lap("compile.scans");
     // Logistic weights from the map's own simulated scans.
     let res = frame.resolution;
     let (w, h) = (input.width as i64, input.height as i64);
@@ -251,17 +297,18 @@ pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, S
         }
     };
     params.w = fit.w;
+    lap("compile.fit");
     params
         .validate()
         .map_err(|f| format!("invalid fitted parameter: {f}"))?;
-    let hists: Vec<Vec<f32>> = scans
-        .par_iter()
-        .map(|s| scan_histogram(s, &params))
-        .collect();
-    let windows: Vec<Vec<f32>> = scans
-        .par_iter()
-        .map(|s| window_histograms(s, &params))
-        .collect();
+    let hist_bytes = per_scan_bytes(&scans, params.hist_cells(), |s| scan_histogram(s, &params));
+    lap("compile.hists");
+    let window_bytes = per_scan_bytes(
+        &scans,
+        params.win_count() * params.win_headings as usize * params.win_cells(),
+        |s| window_histograms(s, &params),
+    );
+    lap("compile.windows");
 
     let meta = MetaRecord {
         width: U32::new(input.width),
@@ -300,10 +347,6 @@ pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, S
         .iter()
         .flat_map(|s| s.iter().flat_map(|v| v.to_le_bytes()))
         .collect();
-    let hist_bytes: Vec<u8> = hists
-        .iter()
-        .flat_map(|s| s.iter().flat_map(|v| v.to_le_bytes()))
-        .collect();
     let grid_bytes: Vec<u8> = input.blocked[..BitGrid::words_for(input.width, input.height)]
         .iter()
         .flat_map(|w| w.to_le_bytes())
@@ -312,14 +355,7 @@ pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, S
         (SectionKind::Meta, meta.as_bytes().to_vec()),
         (SectionKind::Params, params.to_record().as_bytes().to_vec()),
         (SectionKind::Grid, grid_bytes),
-        (SectionKind::Dist, {
-            let bits = grid;
-            let (w, h) = (input.width as usize, input.height as usize);
-            let sq_in = crate::edt::squared_edt(w, h, |i| {
-                !refloc::raycast::Occupancy::blocked(&bits, (i % w) as u32, (i / w) as u32)
-            });
-            dist_section(input.sq_dist, &sq_in)
-        }),
+        (SectionKind::Dist, dist_bytes),
         (SectionKind::Sites, site_records.as_bytes().to_vec()),
         (
             SectionKind::Neighbors,
@@ -327,14 +363,9 @@ pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, S
         ),
         (SectionKind::Scans, scan_bytes),
         (SectionKind::Hists, hist_bytes),
-        (
-            SectionKind::Windows,
-            windows
-                .iter()
-                .flat_map(|s| s.iter().flat_map(|v| v.to_le_bytes()))
-                .collect(),
-        ),
+        (SectionKind::Windows, window_bytes),
     ];
+    lap("compile.sections");
     Ok(Compiled {
         sections,
         params,

@@ -414,6 +414,13 @@ pub fn simulate(
     SimScan { ranges, points }
 }
 
+/// The random stream of E4 pose `k`'s scan (noise and outliers): with
+/// [`simulate`] at the pose's sensor pose it gives the scan [`run_e4`]
+/// localizes (`mapc eval --dump` writes them).
+pub fn e4_rng(seed: u64, k: usize) -> Rng {
+    Rng::stream(seed ^ 0xE4, k as u64)
+}
+
 /// Runs E4 on `poses` (robot poses) with scans simulated in `scan_grid`
 /// (`None`: the database's own grid) and returns one trial per pose.
 pub fn run_e4<D: AsRef<[u8]> + Sync>(
@@ -436,7 +443,7 @@ pub fn run_e4<D: AsRef<[u8]> + Sync>(
         .map_init(
             || vec![0u8; scratch_len],
             |scratch, (k, truth)| {
-                let mut rng = Rng::stream(seed ^ 0xE4, k as u64);
+                let mut rng = e4_rng(seed, k);
                 let sensor = truth.compose(&offset);
                 let s = simulate(grid, frame, &sensor, spec, &mut rng);
                 let scan = match &s.points {
@@ -533,6 +540,25 @@ pub struct E1Trial {
     pub err: Option<[f64; 3]>,
     /// Matching rate: correct accepted correspondences / inlier points.
     pub matching_rate: f64,
+    /// Time of the match from raw points (preparation, descriptors, SSM), µs.
+    #[serde(default)]
+    pub time_us: u64,
+}
+
+/// One E1/E2 scan pair: the reference scan's points and the disturbed,
+/// moved copy, both in their own sensor frames (`NaN` where a beam has no
+/// return), and the true motion that maps query points into the
+/// reference frame.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct E1Pair {
+    /// Reference scan points (m).
+    pub reference: Vec<[f32; 2]>,
+    /// Query points (m): noise, x-y swap outliers, then `motion^-1`.
+    pub query: Vec<[f32; 2]>,
+    /// True motion `[x, y, theta]` (m, m, rad): `reference ≈ motion * query`.
+    pub motion: [f32; 3],
+    /// Query points that are not outliers (finite beams).
+    pub inliers: usize,
 }
 
 /// Scan-to-scan SSM (E1/E2): the scan at `pose` against a disturbed,
@@ -548,6 +574,21 @@ pub fn ssm_trial<D: AsRef<[u8]>>(
     max_rot: f32,
     rng: &mut Rng,
 ) -> E1Trial {
+    let pair = e1_pair(db, pose, noise, outliers, max_shift, max_rot, rng);
+    ssm_match_pair(db, &pair)
+}
+
+/// The scan pair of [`ssm_trial`] (every random choice of the trial).
+#[allow(clippy::too_many_arguments)]
+pub fn e1_pair<D: AsRef<[u8]>>(
+    db: &RefDb<D>,
+    pose: &Pose2,
+    noise: f32,
+    outliers: usize,
+    max_shift: f32,
+    max_rot: f32,
+    rng: &mut Rng,
+) -> E1Pair {
     let params = db.params();
     let lidar = crate::compile::ref_lidar(params);
     let grid = db.grid();
@@ -589,6 +630,19 @@ pub fn ssm_trial<D: AsRef<[u8]>>(
         .iter()
         .map(|p| if p[0].is_finite() { inv.apply(*p) } else { *p })
         .collect();
+    E1Pair {
+        reference: ref_pts,
+        query: q,
+        motion: [motion.x, motion.y, motion.theta],
+        inliers: n_in,
+    }
+}
+
+/// SSM of one [`E1Pair`] from raw points, scored against its true motion.
+pub fn ssm_match_pair<D: AsRef<[u8]>>(db: &RefDb<D>, pair: &E1Pair) -> E1Trial {
+    let params = db.params();
+    let (q, ref_pts, n_in) = (&pair.query, &pair.reference, pair.inliers);
+    let motion = Pose2::new(pair.motion[0], pair.motion[1], pair.motion[2]);
     let np = params.max_points as usize;
     let (mut qp, mut qt, mut rp, mut rt) = (
         vec![[0f32; 2]; np],
@@ -596,8 +650,9 @@ pub fn ssm_trial<D: AsRef<[u8]>>(
         vec![[0f32; 2]; np],
         vec![[0f32; 2]; np],
     );
-    let nq = prep::prepare(&q, true, params, &mut qp, &mut qt);
-    let nr = prep::prepare(&ref_pts, true, params, &mut rp, &mut rt);
+    let t0 = std::time::Instant::now();
+    let nq = prep::prepare(q, true, params, &mut qp, &mut qt);
+    let nr = prep::prepare(ref_pts, true, params, &mut rp, &mut rt);
     let nl = np * params.tentative_k as usize;
     let (mut qd, mut rd) = (vec![0f32; np * DESC_LEN], vec![0f32; np * DESC_LEN]);
     ssm::descriptors(&qp[..nq], &qt[..nq], params.desc_radius, &mut qd);
@@ -619,14 +674,16 @@ pub fn ssm_trial<D: AsRef<[u8]>>(
         acc: &mut acc,
         flags: &mut flags,
     };
-    match ssm::match_scans(
+    let matched = ssm::match_scans(
         &qp[..nq],
         &qt[..nq],
         &rp[..nr],
         &rt[..nr],
         params,
         &mut work,
-    ) {
+    );
+    let time_us = t0.elapsed().as_micros() as u64;
+    match matched {
         Some(m) => {
             let e = [
                 (m.pose.x - motion.x) as f64,
@@ -646,11 +703,13 @@ pub fn ssm_trial<D: AsRef<[u8]>>(
             E1Trial {
                 err: Some(e),
                 matching_rate: (good as f64 / inl as f64).min(1.0),
+                time_us,
             }
         }
         None => E1Trial {
             err: None,
             matching_rate: 0.0,
+            time_us,
         },
     }
 }

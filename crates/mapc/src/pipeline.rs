@@ -62,6 +62,12 @@ pub struct BuildConfig {
     pub ambiguity_ratio: f32,
     /// Most stored SSM affinity entries (8 bytes of scratch each).
     pub affinity_cap: u32,
+    /// Free-space check: most beams through walls, as a share of the beams (0: off).
+    pub through_max: f32,
+    /// Weight of a short beam against a pose, as a share of a hit's (0: the paper's M).
+    pub short_weight: f32,
+    /// Free-space check: least run of consecutive through-wall beams that counts.
+    pub through_run: u32,
 }
 
 impl Default for BuildConfig {
@@ -87,6 +93,9 @@ impl Default for BuildConfig {
             early_min: Params::defaults(362, 30.0).early_min,
             ambiguity_ratio: Params::defaults(362, 30.0).ambiguity_ratio,
             affinity_cap: Params::defaults(362, 30.0).affinity_cap,
+            through_max: Params::defaults(362, 30.0).through_max,
+            short_weight: Params::defaults(362, 30.0).short_weight,
+            through_run: Params::defaults(362, 30.0).through_run,
         }
     }
 }
@@ -110,6 +119,9 @@ impl BuildConfig {
         p.early_min = self.early_min;
         p.ambiguity_ratio = self.ambiguity_ratio;
         p.affinity_cap = self.affinity_cap;
+        p.through_max = self.through_max;
+        p.short_weight = self.short_weight;
+        p.through_run = self.through_run;
         if self.fov_windows_deg.len() > 2 {
             return Err("at most two --fov-windows widths".into());
         }
@@ -142,6 +154,87 @@ pub struct StageTimes {
     pub sites: f64,
     /// Reference scans, histograms, fit, sections.
     pub compile: f64,
+    /// Finer steps, in order (`mapc build --timings` prints them).
+    pub steps: Vec<StepTime>,
+}
+
+/// One step of a build: its wall-clock and process CPU time, and the peak
+/// resident set of the process when it ended.
+#[derive(Clone, Debug, Serialize)]
+pub struct StepTime {
+    /// Step name ("edt", "compile.windows", ...).
+    pub name: &'static str,
+    /// Wall-clock time (s).
+    pub wall: f64,
+    /// CPU time of the whole process, all threads, user + system (s); `None`
+    /// where `/proc/self/stat` cannot be read.
+    pub cpu: Option<f64>,
+    /// Peak resident set size of the process so far (bytes, `VmHWM`);
+    /// `None` where `/proc/self/status` cannot be read.
+    pub peak_rss: Option<u64>,
+}
+
+/// CPU time (user + system, all threads) of this process so far (s), from
+/// `/proc/self/stat` (Linux; in USER_HZ = 100 ticks per second).
+pub fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name; utime and stime are the
+    // 14th and 15th fields of the line, the 12th and 13th after it.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let mut f = rest.split_whitespace().skip(11);
+    let utime: u64 = f.next()?.parse().ok()?;
+    let stime: u64 = f.next()?.parse().ok()?;
+    Some((utime + stime) as f64 / 100.0)
+}
+
+/// Peak resident set size of this process so far (bytes, `VmHWM` of
+/// `/proc/self/status`; Linux).
+pub fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// Measures consecutive steps: each [`Laps::lap`] ends one.
+pub struct Laps {
+    wall: Instant,
+    cpu: Option<f64>,
+    steps: Vec<StepTime>,
+}
+
+impl Laps {
+    /// Starts the first step now.
+    pub fn start() -> Self {
+        Laps {
+            wall: Instant::now(),
+            cpu: process_cpu_seconds(),
+            steps: Vec::new(),
+        }
+    }
+
+    /// Ends the current step, naming it, and starts the next.
+    pub fn lap(&mut self, name: &'static str) {
+        let cpu = process_cpu_seconds();
+        self.steps.push(StepTime {
+            name,
+            wall: self.wall.elapsed().as_secs_f64(),
+            cpu: cpu.zip(self.cpu).map(|(b, a)| b - a),
+            peak_rss: peak_rss_bytes(),
+        });
+        self.wall = Instant::now();
+        self.cpu = cpu;
+    }
+
+    /// The steps measured so far.
+    pub fn steps(&self) -> &[StepTime] {
+        &self.steps
+    }
+
+    /// The measured steps.
+    pub fn into_steps(self) -> Vec<StepTime> {
+        self.steps
+    }
 }
 
 /// What a build produced.
@@ -174,16 +267,20 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> 
     let params = cfg.params()?;
     let grid = &src.grid;
     let mut times = StageTimes::default();
+    let mut laps = Laps::start();
     let t = Instant::now();
-    let df = DistanceField::from_grid(grid, cfg.unknown_blocks);
+    let mut df = DistanceField::from_grid(grid, cfg.unknown_blocks);
     times.edt = t.elapsed().as_secs_f64();
+    laps.lap("edt");
     let t = Instant::now();
     let gopts = GvdOptions {
         robot_radius_m: cfg.robot_radius,
         unknown_is_obstacle: cfg.unknown_blocks,
         ..GvdOptions::default()
     };
-    let graph = gvd::extract(grid, &df, &gopts);
+    let graph = gvd::extract_with(grid, &df, &gopts, &mut |name| laps.lap(name));
+    // Only the GVD needs the nearest obstacles (4 bytes per cell): free them.
+    df.nearest = Vec::new();
     times.gvd = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let sopts = SiteOptions {
@@ -196,8 +293,10 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> 
     let bitgrid =
         refloc::raycast::BitGrid::new(grid.width, grid.height, &blocked).ok_or("grid too large")?;
     let placed = sites::place_sites(grid, &df, &graph, &sopts);
+    laps.lap("sites.place");
     let coverage = sites::coverage(grid, &bitgrid, &df, &placed, 0.25, cfg.coverage_range);
     times.sites = t.elapsed().as_secs_f64();
+    laps.lap("sites.coverage");
     let t = Instant::now();
     let site_in: Vec<SiteIn> = placed
         .iter()
@@ -226,7 +325,7 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> 
         params,
         scans,
         fit,
-    } = compile::compile(&input, &site_in)?;
+    } = compile::compile_with(&input, &site_in, &mut |name| laps.lap(name))?;
     times.compile = t.elapsed().as_secs_f64();
     let manifest = serde_json::json!({
         "generator": "mapc",
@@ -249,6 +348,8 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> 
         SectionKind::Manifest,
         serde_json::to_vec_pretty(&manifest).map_err(|e| e.to_string())?,
     ));
+    laps.lap("manifest");
+    times.steps = laps.into_steps();
     Ok(BuildOutput {
         sections,
         gvd: graph,

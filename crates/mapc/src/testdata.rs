@@ -32,3 +32,31 @@ pub fn shared(rel: &str) -> Option<PathBuf> {
     }
     p
 }
+
+/// Raw PNG pieces for tests that hand-craft (often hostile) PNG files.
+pub mod png {
+    /// CRC-32 (ISO-HDLC, the PNG chunk checksum) of `data`.
+    pub fn crc32(data: &[u8]) -> u32 {
+        let mut crc = !0u32;
+        for &b in data {
+            crc ^= b as u32;
+            for _ in 0..8 {
+                crc = if crc & 1 != 0 {
+                    (crc >> 1) ^ 0xEDB8_8320
+                } else {
+                    crc >> 1
+                };
+            }
+        }
+        !crc
+    }
+
+    /// Appends one chunk (length, kind, data, CRC) to `out`.
+    pub fn chunk(out: &mut Vec<u8>, kind: &[u8; 4], data: &[u8]) {
+        out.extend_from_slice(&(data.len() as u32).to_be_bytes());
+        let mut c = kind.to_vec();
+        c.extend_from_slice(data);
+        out.extend_from_slice(&c);
+        out.extend_from_slice(&crc32(&c).to_be_bytes());
+    }
+}

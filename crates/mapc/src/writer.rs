@@ -13,12 +13,9 @@ pub fn write_refdb(path: &Path, sections: &[(SectionKind, &[u8])]) -> io::Result
     write_atomic(path, |w| encode(sections, |b| w.write_all(b)))
 }
 
-/// Runs `fill` on a temporary file beside `path`, then renames it to `path`.
-/// On any error the temporary file is removed and `path` is untouched.
-pub fn write_atomic<T>(
-    path: &Path,
-    fill: impl FnOnce(&mut dyn Write) -> io::Result<T>,
-) -> io::Result<T> {
+/// A new, empty temporary file beside `path` (same directory, so the
+/// final rename cannot cross file systems), removed when dropped.
+fn temp_beside(path: &Path) -> io::Result<tempfile::NamedTempFile> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
@@ -29,10 +26,28 @@ pub fn write_atomic<T>(
             format!("{} is not a file path", path.display()),
         )
     })?;
-    let mut tmp = tempfile::Builder::new()
+    tempfile::Builder::new()
         .prefix(&format!(".{}.", name.to_string_lossy()))
         .suffix(".tmp")
-        .tempfile_in(dir)?;
+        .tempfile_in(dir)
+}
+
+/// Checks that [`write_atomic`] could write `path` now: a temporary file
+/// can be created beside it (and is removed again). `path` itself is not
+/// touched. Meant to fail fast, before a long computation whose result
+/// could not be saved (a read-only or missing directory); the write itself
+/// still reports its own errors.
+pub fn check_writable(path: &Path) -> io::Result<()> {
+    temp_beside(path).map(drop)
+}
+
+/// Runs `fill` on a temporary file beside `path`, then renames it to `path`.
+/// On any error the temporary file is removed and `path` is untouched.
+pub fn write_atomic<T>(
+    path: &Path,
+    fill: impl FnOnce(&mut dyn Write) -> io::Result<T>,
+) -> io::Result<T> {
+    let mut tmp = temp_beside(path)?;
     let out = {
         let mut w = io::BufWriter::new(tmp.as_file_mut());
         let out = fill(&mut w)?;
@@ -75,6 +90,20 @@ mod tests {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names.len(), 1, "temporary file left behind: {names:?}");
+    }
+
+    #[test]
+    fn check_writable_leaves_nothing_and_fails_on_a_missing_directory() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a.refdb");
+        check_writable(&p).unwrap();
+        std::fs::write(&p, b"good").unwrap();
+        check_writable(&p).unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"good");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+        let e = check_writable(&dir.path().join("missing/a.refdb")).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::NotFound, "{e}");
+        assert!(check_writable(Path::new("/")).is_err());
     }
 
     #[test]

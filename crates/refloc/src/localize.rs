@@ -162,6 +162,14 @@ pub struct Candidate {
     pub long_beams: u32,
     /// N_P: input beams with a return.
     pub pairs: u32,
+    /// Input beams through a wall at this pose (see [`crate::verify::Vicinity::through`]).
+    pub through_beams: u32,
+    /// 1 when the pose passes the free-space check (few beams through walls).
+    pub free_space_ok: u32,
+    /// The evidence for this pose: M less `short_weight * 4.5` per short
+    /// beam (see [`crate::verify::Vicinity::evidence`]); selection,
+    /// ambiguity and acceptance compare it with the threshold.
+    pub evidence: f32,
 }
 
 /// The answer for one scan.
@@ -185,7 +193,9 @@ pub struct Localization<'s> {
     pub vicinity: f32,
     /// Its acceptance threshold.
     pub vicinity_threshold: f32,
-    /// M > threshold and not ambiguous.
+    /// The evidence for the pose: M less a share of the short beams' weight.
+    pub evidence: f32,
+    /// evidence > threshold, few beams through walls, and not ambiguous.
     pub accepted: bool,
     /// Another candidate with a clearly different pose scored within
     /// `ambiguity_ratio` of the best (the pose is then not accepted).
@@ -196,6 +206,10 @@ pub struct Localization<'s> {
     pub short_beams: u32,
     /// Input beams longer than the map allows at the pose.
     pub long_beams: u32,
+    /// Input beams through a wall at the pose (the free-space check).
+    pub through_beams: u32,
+    /// The pose passes the free-space check.
+    pub free_space_ok: bool,
     /// Every candidate examined, in coarse rank order.
     pub candidates: &'s [Candidate],
 }
@@ -401,14 +415,9 @@ pub fn localize<'s, D: AsRef<[u8]>>(
     ssm::descriptors(q_pts, q_tan, params.desc_radius, work.qdesc);
     let s = &params.sensor;
     let ref_wrap = prep::covers_full_turn(s.angle_increment, s.beams as usize);
-    let dm = DistMap {
-        width: db.grid_size().0,
-        height: db.grid_size().1,
-        data: db.dist(),
-        frame: db.frame(),
-    };
+    let dm = DistMap::of(db);
     let grid = db.grid();
-    let frame = db.frame();
+    let verifier = verify::Verifier::new(db, &grid, range_max);
     let offset_inv = s.offset.inverse();
     let mut best: Option<usize> = None;
     let mut examined = nc;
@@ -445,19 +454,15 @@ pub fn localize<'s, D: AsRef<[u8]>>(
                 )
                 .0;
             }
-            let v = verify::vicinity(
-                &grid,
-                &frame,
+            let v = verifier.score(
                 &sensor,
                 in_ang
                     .iter()
                     .copied()
                     .zip(in_rng.iter().copied())
                     .take(n_beams),
-                range_max,
-                params.sigma_d,
-                params.accept_ratio,
             );
+            let free_ok = v.free_space_ok(params.through_max);
             let robot = sensor.compose(&offset_inv);
             cand.match_score = m.score;
             cand.matched = m.matched;
@@ -471,11 +476,16 @@ pub fn localize<'s, D: AsRef<[u8]>>(
             cand.short_beams = v.short;
             cand.long_beams = v.long;
             cand.pairs = v.pairs;
+            cand.through_beams = v.through;
+            cand.free_space_ok = free_ok as u32;
+            cand.evidence = v.evidence(params.short_weight);
+            // A pose that passes the free-space check beats one that fails it.
             let better = match best {
                 None => true,
+                Some(b) if cands[b].free_space_ok != cand.free_space_ok => free_ok,
                 Some(b) => match params.selection {
                     Selection::MatchScore => cand.match_score > cands[b].match_score,
-                    Selection::Vicinity => cand.vicinity > cands[b].vicinity,
+                    Selection::Vicinity => cand.evidence > cands[b].evidence,
                 },
             };
             if better {
@@ -486,23 +496,19 @@ pub fn localize<'s, D: AsRef<[u8]>>(
             // almost perfectly, at most a fifth are blocked, and M passes the
             // acceptance threshold), or enough candidates examined and an
             // acceptable best.
-            let best_m = best
+            let best_ok = best
                 .map(|b| {
-                    if b == c {
-                        cand.vicinity
-                    } else {
-                        cands[b].vicinity
-                    }
+                    let bc = if b == c { &cand } else { &cands[b] };
+                    bc.free_space_ok != 0 && bc.evidence > v.threshold
                 })
-                .unwrap_or(0.0);
+                .unwrap_or(false);
             let done = params.selection == Selection::Vicinity
                 && params.early_accept > 0.0
                 && ((v.explained_ratio() >= params.early_accept
                     && v.short * 5 <= v.pairs
-                    && v.score > v.threshold)
-                    || (params.early_min > 0
-                        && c + 1 >= params.early_min as usize
-                        && best_m > v.threshold));
+                    && cand.evidence > v.threshold
+                    && free_ok)
+                    || (params.early_min > 0 && c + 1 >= params.early_min as usize && best_ok));
             cands[c] = cand;
             if done {
                 examined = c + 1;
@@ -517,13 +523,18 @@ pub fn localize<'s, D: AsRef<[u8]>>(
     let c = cands[b];
     let pose = Pose2::new(c.x, c.y, c.theta);
     // Ambiguity: another examined candidate far from this pose that explains
-    // the scan almost as well.
+    // the scan almost as well (and passes the free-space check: a pose
+    // that sees through walls is no alternative).
     let ambiguous = params.ambiguity_ratio > 0.0
         && cands.iter().any(|o| {
             let far = (o.x - c.x) * (o.x - c.x) + (o.y - c.y) * (o.y - c.y) > 1.0
                 || libm::fabsf(crate::wrap_angle(o.theta - c.theta)) > 0.349_066; // 20 degrees
-            o.has_pose != 0 && far && o.vicinity >= params.ambiguity_ratio * c.vicinity
+            o.has_pose != 0
+                && o.free_space_ok != 0
+                && far
+                && o.evidence >= params.ambiguity_ratio * c.evidence
         });
+    let free_ok = c.free_space_ok != 0;
     Ok(Localization {
         pose,
         sensor_pose: pose.compose(&s.offset),
@@ -534,11 +545,14 @@ pub fn localize<'s, D: AsRef<[u8]>>(
         inliers: c.inliers,
         vicinity: c.vicinity,
         vicinity_threshold: c.vicinity_threshold,
-        accepted: c.vicinity > c.vicinity_threshold && !ambiguous,
+        evidence: c.evidence,
+        accepted: c.evidence > c.vicinity_threshold && free_ok && !ambiguous,
         ambiguous,
         valid_points: valid as u32,
         short_beams: c.short_beams,
         long_beams: c.long_beams,
+        through_beams: c.through_beams,
+        free_space_ok: free_ok,
         candidates: cands,
     })
 }
@@ -576,7 +590,8 @@ fn load_scan(
             if !(r.range_max.is_finite()
                 && r.range_max > 0.0
                 && r.range_min.is_finite()
-                && r.range_min >= 0.0)
+                && r.range_min >= 0.0
+                && r.range_min < r.range_max)
             {
                 return Err(LocalizeError::BadScan(
                     "range_min/range_max must be finite, 0 <= range_min < range_max",
@@ -614,8 +629,15 @@ fn load_scan(
             let (mut ccw, mut cw) = (0usize, 0usize);
             let mut turn = 0.0f32;
             let mut last: Option<[f32; 2]> = None;
+            // Only points that will be kept (finite, within range) vote, so
+            // points discarded as "no return" cannot fake a direction or a
+            // coverage.
+            let keep = |p: &[f32; 2]| {
+                let r = crate::math::norm(*p);
+                p[0].is_finite() && p[1].is_finite() && r > 0.0 && r <= *range_max
+            };
             for p in points.iter() {
-                if p[0].is_finite() && p[1].is_finite() {
+                if keep(p) {
                     if let Some(l) = last {
                         let step = crate::math::signed_angle(l, *p);
                         if libm::fabsf(step) < core::f32::consts::FRAC_PI_4 {
@@ -634,7 +656,7 @@ fn load_scan(
             for k in 0..n {
                 let p = points[if rev { n - 1 - k } else { k }];
                 let r = crate::math::norm(p);
-                if p[0].is_finite() && p[1].is_finite() && r > 0.0 && r <= *range_max {
+                if keep(&p) {
                     pts[k] = p;
                     ang[k] = crate::math::atan2(p[1], p[0]);
                     rng[k] = r;

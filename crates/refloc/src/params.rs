@@ -113,6 +113,17 @@ pub struct Params {
     pub ambiguity_ratio: f32,
     /// Most stored affinity entries per SSM match (8 bytes each of scratch).
     pub affinity_cap: u32,
+    /// Free-space check: most beams through a wall, as a share of the beams
+    /// with a return, for a pose to be accepted (see [`crate::verify`]; 0: off).
+    pub through_max: f32,
+    /// Free-space check: least excess range (m) of a beam through a wall.
+    pub through_excess: f32,
+    /// Verification: weight of a short beam against the pose, as a share of
+    /// a hit's (see [`crate::verify::Vicinity::evidence`]; 0: the paper's M).
+    pub short_weight: f32,
+    /// Free-space check: beams through a wall count only in runs of at
+    /// least this many consecutive beams (0 or 1: every one counts).
+    pub through_run: u32,
 }
 
 impl Params {
@@ -162,6 +173,10 @@ impl Params {
             early_min: 0,
             ambiguity_ratio: 0.97,
             affinity_cap: 16 * 1024,
+            through_max: 0.01,
+            through_excess: 0.5,
+            short_weight: 1.0,
+            through_run: 3,
         }
     }
 
@@ -296,6 +311,18 @@ impl Params {
         if !(self.ambiguity_ratio >= 0.0 && self.ambiguity_ratio <= 1.0) {
             return Err("ambiguity_ratio");
         }
+        if !(self.through_max >= 0.0 && self.through_max <= 1.0) {
+            return Err("through_max");
+        }
+        if !(self.through_excess.is_finite() && self.through_excess >= 0.0) {
+            return Err("through_excess");
+        }
+        if !(self.short_weight >= 0.0 && self.short_weight <= 1.0) {
+            return Err("short_weight");
+        }
+        if self.through_run > 64 {
+            return Err("through_run");
+        }
         if !(self.early_accept >= 0.0 && self.early_accept <= 1.0) {
             return Err("early_accept");
         }
@@ -357,6 +384,10 @@ impl Params {
             early_min: r.early_min.get(),
             ambiguity_ratio: r.ambiguity_ratio.get(),
             affinity_cap: r.affinity_cap.get(),
+            through_max: r.through_max.get(),
+            through_excess: r.through_excess.get(),
+            short_weight: r.short_weight.get(),
+            through_run: r.through_run.get(),
         })
     }
 
@@ -412,7 +443,11 @@ impl Params {
             early_min: U32::new(self.early_min),
             ambiguity_ratio: F32::new(self.ambiguity_ratio),
             affinity_cap: U32::new(self.affinity_cap),
-            reserved: [U32::new(0); 5],
+            through_max: F32::new(self.through_max),
+            through_excess: F32::new(self.through_excess),
+            short_weight: F32::new(self.short_weight),
+            through_run: U32::new(self.through_run),
+            reserved: [U32::new(0); 1],
         }
     }
 }

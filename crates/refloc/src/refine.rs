@@ -20,7 +20,18 @@ pub struct DistMap<'a> {
     pub frame: MapFrame,
 }
 
-impl DistMap<'_> {
+impl<'a> DistMap<'a> {
+    /// The distance map stored in `db`.
+    pub fn of<D: AsRef<[u8]>>(db: &'a crate::RefDb<D>) -> DistMap<'a> {
+        let (width, height) = db.grid_size();
+        DistMap {
+            width,
+            height,
+            data: db.dist(),
+            frame: db.frame(),
+        }
+    }
+
     #[inline]
     fn at(&self, cx: i64, cy: i64) -> f32 {
         if cx < 0 || cy < 0 || cx >= self.width as i64 || cy >= self.height as i64 {

@@ -1090,3 +1090,129 @@ fn localize_works_in_a_misaligned_scratch() {
         );
     }
 }
+
+// ---------------------------------------------------------------------------
+// verify: free-space check and short-beam weight
+// ---------------------------------------------------------------------------
+
+/// `n` beams 0.001 rad apart, starting along the grid's +u axis from the
+/// centre of cell (u, v), all with range `range`, scored against the
+/// fixture database's verifier.
+fn beams(db: &RefDb<&[u8]>, cell: [f32; 2], range: f32, n: usize) -> crate::verify::Vicinity {
+    let grid = db.grid();
+    let frame = db.frame();
+    let p = frame.to_map(cell);
+    let sensor = Pose2::new(p[0], p[1], frame.origin.theta);
+    crate::verify::Verifier::new(db, &grid, fixture::RANGE_MAX)
+        .score(&sensor, (0..n).map(|k| (k as f32 * 0.001, range)))
+}
+
+#[test]
+fn verifier_tells_a_wall_seen_through_from_long_beams_ending_on_a_surface() {
+    let buf = tiny_db();
+    let db = RefDb::new(buf.bytes()).unwrap();
+    let p = db.params();
+    assert!(
+        p.through_max > 0.0 && p.through_run == 3,
+        "the check is on by default"
+    );
+    let run = p.through_run as usize;
+    // From (10.5, 15.5) the inner wall (u = 20) is 0.95 m away along +u.
+    let start = [10.5, 15.5];
+    let hit = beams(&db, start, 0.95, run);
+    assert_eq!((hit.short, hit.long, hit.through), (0, 0, 0), "{hit:?}");
+    assert!(hit.score > 4.4 * run as f32, "{hit:?}");
+    // 0.3 m past the wall: long, but less than through_excess (0.5 m) past it.
+    let long = beams(&db, start, 1.25, run);
+    assert_eq!((long.long, long.through), (run as u32, 0), "{long:?}");
+    // 1.5 m past the wall, ending in free space 0.35 m from the nearest
+    // surface: through the wall, once the run is long enough.
+    let through = beams(&db, start, 2.45, run);
+    assert_eq!(
+        (through.long, through.through),
+        (run as u32, run as u32),
+        "{through:?}"
+    );
+    assert!(!through.free_space_ok(0.5) && through.free_space_ok(1.0));
+    assert!(through.free_space_ok(0.0), "0 turns the check off");
+    let isolated = beams(&db, start, 2.45, run - 1);
+    assert_eq!(
+        isolated.through, 0,
+        "a shorter run is a spurious return: {isolated:?}"
+    );
+    let longer = beams(&db, start, 2.45, run + 2);
+    assert_eq!(longer.through, run as u32 + 2, "{longer:?}");
+    // Past the wall all the way to the far border: long by metres, but the
+    // end points lie on a surface of the map, so not through.
+    let border = beams(&db, start, 4.85, run);
+    assert_eq!((border.long, border.through), (run as u32, 0), "{border:?}");
+    // Far beyond the map: through (outside the grid is away from surfaces).
+    let outside = beams(&db, start, 9.0, run);
+    assert_eq!(outside.through, run as u32, "{outside:?}");
+    // Short: in front of the wall.
+    let short = beams(&db, start, 0.5, run);
+    assert_eq!((short.short, short.long, short.through), (run as u32, 0, 0));
+}
+
+#[test]
+fn evidence_takes_a_share_of_a_hit_per_short_beam() {
+    let v = crate::verify::Vicinity {
+        score: 90.0,
+        threshold: 45.0,
+        pairs: 20,
+        short: 4,
+        long: 0,
+        through: 0,
+    };
+    assert_eq!(v.evidence(0.0), 90.0);
+    assert_eq!(v.evidence(0.5), 90.0 - 4.0 * 4.5 * 0.5);
+    assert_eq!(v.evidence(1.0), 90.0 - 4.0 * 4.5);
+}
+
+#[test]
+fn localize_does_not_accept_a_pose_that_sees_through_walls() {
+    let buf = tiny_db();
+    let db = RefDb::new(buf.bytes()).unwrap();
+    let (_, mut ranges) = truth_and_scan();
+    let clean = {
+        let mut scratch = vec![0u8; scratch_size(db.params(), ranges.len())];
+        let l = localize(&db, &ranges_scan(&ranges), &mut scratch).unwrap();
+        (l.accepted, l.free_space_ok, l.through_beams)
+    };
+    assert_eq!(clean, (true, true, 0));
+    // Runs of 4 beams in every 16 return 1 m beyond the surface they
+    // should have hit.
+    for (k, r) in ranges.iter_mut().enumerate() {
+        if k % 16 < 4 {
+            *r += 1.0;
+        }
+    }
+    let mut scratch = vec![0u8; scratch_size(db.params(), ranges.len())];
+    let l = localize(&db, &ranges_scan(&ranges), &mut scratch).unwrap();
+    assert!(!l.accepted && !l.free_space_ok, "{l:?}");
+    assert!(l.through_beams as f32 > db.params().through_max * l.valid_points as f32);
+    assert!(l
+        .candidates
+        .iter()
+        .all(|c| c.free_space_ok == 0 || c.vicinity <= c.vicinity_threshold));
+}
+
+#[test]
+fn localize_rejects_range_min_not_below_range_max() {
+    let buf = tiny_db();
+    let db = RefDb::new(buf.bytes()).unwrap();
+    let (_, ranges) = truth_and_scan();
+    for (lo, hi) in [(5.0, 5.0), (6.0, 5.0)] {
+        let scan = Scan::Ranges(RangeScan {
+            angle_min: -PI,
+            angle_increment: 2.0 * PI / ranges.len() as f32,
+            range_min: lo,
+            range_max: hi,
+            ranges: &ranges,
+        });
+        assert!(
+            matches!(run(&db, &scan), Err(LocalizeError::BadScan(_))),
+            "{lo} {hi}"
+        );
+    }
+}

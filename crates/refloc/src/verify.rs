@@ -7,9 +7,19 @@
 //! `m = 4.5 - d^2 / (2 sigma_d^2)` when `d < 3 sigma_d`, else 0.
 //! `M = sum m` over the `N_P` input beams with a return; the pose is accepted
 //! when `M > 4.5 * N_P * accept_ratio` (the paper's `accept_ratio` is 1/2).
+//!
+//! Beyond the paper, a free-space check: a beam that returns well beyond a
+//! surface of the map (by `through_excess` or more) *and* ends away from any
+//! surface (3 sigma_d or more from it, by the database's distance map) has
+//! passed through a wall. A static world with a correct pose allows few of
+//! them (glass, an open door, map errors); a pose on the wrong map or in the
+//! wrong place makes many. Unlike the range difference alone, the endpoint
+//! test forgives beams at grazing incidence, whose range error under a small
+//! pose error is large but whose endpoint still lies on the surface.
 
-use crate::raycast::{cast, Occupancy};
-use crate::{MapFrame, Pose2};
+use crate::raycast::{cast, BitGrid, Occupancy};
+use crate::refine::DistMap;
+use crate::{MapFrame, Pose2, RefDb};
 
 /// The vicinity score of a pose.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -28,6 +38,13 @@ pub struct Vicinity {
     /// Input beams longer than the virtual beam by 3 sigma_d or more: the
     /// scan sees through where the map has a surface.
     pub long: u32,
+    /// Of the long beams, those longer by `through_excess` or more whose end
+    /// point lies 3 sigma_d or more from every surface of the map, in runs
+    /// of at least `through_run` consecutive beams: beams through a wall (0
+    /// when no distance map is given). An isolated such beam (a spurious
+    /// return, a reflection) does not count; a wall seen through over an
+    /// angular extent does.
+    pub through: u32,
 }
 
 impl Vicinity {
@@ -43,53 +60,131 @@ impl Vicinity {
     }
 }
 
-/// Scores `sensor` (map frame) for input beams given as (angle in the sensor
-/// frame, range) pairs; non-finite ranges are skipped. `range_max` bounds the
-/// virtual beams (m).
-#[allow(clippy::too_many_arguments)]
-pub fn vicinity<G: Occupancy + ?Sized>(
-    grid: &G,
-    frame: &MapFrame,
-    sensor: &Pose2,
-    beams: impl Iterator<Item = (f32, f32)>,
-    range_max: f32,
-    sigma_d: f32,
-    accept_ratio: f32,
-) -> Vicinity {
-    let uv = frame.to_cells([sensor.x, sensor.y]);
-    let max_cells = range_max / frame.resolution;
-    let lim = 3.0 * sigma_d;
-    let inv = 1.0 / (2.0 * sigma_d * sigma_d);
-    let mut m = 0.0f32;
-    let mut n = 0u32;
-    let mut short = 0u32;
-    let mut long = 0u32;
-    for (a, r) in beams {
-        if !r.is_finite() {
-            continue;
-        }
-        n += 1;
-        let ang = frame.angle_to_cells(sensor.theta + a);
-        match cast(grid, uv[0], uv[1], ang, max_cells) {
-            Some(t) => {
-                let v = t * frame.resolution;
-                let d = libm::fabsf(v - r);
-                if d < lim {
-                    m += 4.5 - d * d * inv;
-                } else if r < v {
-                    short += 1;
-                } else {
-                    long += 1;
-                }
-            }
-            None => short += 1,
+/// The verification's map and settings.
+#[derive(Clone, Copy)]
+pub struct Verifier<'a, G: Occupancy + ?Sized> {
+    /// Occupancy for the virtual beams.
+    pub grid: &'a G,
+    /// Grid placement.
+    pub frame: MapFrame,
+    /// Distance to the nearest surface, for the through-wall test (`None`
+    /// skips it: [`Vicinity::through`] stays 0).
+    pub dist: Option<DistMap<'a>>,
+    /// Bound of the virtual beams (m).
+    pub range_max: f32,
+    /// sigma_d (m).
+    pub sigma_d: f32,
+    /// Accept when `M > 4.5 N_P accept_ratio`.
+    pub accept_ratio: f32,
+    /// Least excess range (m) of a beam through a wall.
+    pub through_excess: f32,
+    /// Beams through a wall count only in runs of at least this many
+    /// consecutive beams (beams with no return do not break a run).
+    pub through_run: u32,
+}
+
+impl<'a> Verifier<'a, BitGrid<'a>> {
+    /// The verifier of `db` (its grid `grid = db.grid()`, distance map and
+    /// parameters) for a sensor of maximum range `range_max` (m).
+    pub fn new<D: AsRef<[u8]>>(db: &'a RefDb<D>, grid: &'a BitGrid<'a>, range_max: f32) -> Self {
+        let p = db.params();
+        Verifier {
+            grid,
+            frame: db.frame(),
+            dist: (p.through_max > 0.0).then(|| DistMap::of(db)),
+            range_max,
+            sigma_d: p.sigma_d,
+            accept_ratio: p.accept_ratio,
+            through_excess: p.through_excess,
+            through_run: p.through_run,
         }
     }
-    Vicinity {
-        score: m,
-        threshold: 4.5 * n as f32 * accept_ratio,
-        pairs: n,
-        short,
-        long,
+}
+
+impl<G: Occupancy + ?Sized> Verifier<'_, G> {
+    /// Scores `sensor` (map frame) for input beams given as (angle in the
+    /// sensor frame (rad), range (m)) pairs; non-finite ranges are skipped.
+    pub fn score(&self, sensor: &Pose2, beams: impl Iterator<Item = (f32, f32)>) -> Vicinity {
+        let frame = &self.frame;
+        let uv = frame.to_cells([sensor.x, sensor.y]);
+        let max_cells = self.range_max / frame.resolution;
+        let lim = 3.0 * self.sigma_d;
+        let inv = 1.0 / (2.0 * self.sigma_d * self.sigma_d);
+        let mut m = 0.0f32;
+        let mut n = 0u32;
+        let mut short = 0u32;
+        let mut long = 0u32;
+        let mut through = 0u32;
+        let min_run = self.through_run.max(1);
+        let mut run = 0u32;
+        for (a, r) in beams {
+            if !r.is_finite() {
+                continue;
+            }
+            n += 1;
+            let heading = sensor.theta + a;
+            let mut through_here = false;
+            let ang = frame.angle_to_cells(heading);
+            match cast(self.grid, uv[0], uv[1], ang, max_cells) {
+                Some(t) => {
+                    let v = t * frame.resolution;
+                    let d = libm::fabsf(v - r);
+                    if d < lim {
+                        m += 4.5 - d * d * inv;
+                    } else if r < v {
+                        short += 1;
+                    } else {
+                        long += 1;
+                        if r - v >= self.through_excess {
+                            if let Some(dm) = &self.dist {
+                                let end = [
+                                    sensor.x + r * libm::cosf(heading),
+                                    sensor.y + r * libm::sinf(heading),
+                                ];
+                                // Outside the grid counts as away from surfaces.
+                                let off = dm.sample(end).is_none_or(|(e, _)| libm::fabsf(e) >= lim);
+                                through_here = off;
+                            }
+                        }
+                    }
+                }
+                None => short += 1,
+            }
+            if through_here {
+                run += 1;
+                if run == min_run {
+                    through += min_run;
+                } else if run > min_run {
+                    through += 1;
+                }
+            } else {
+                run = 0;
+            }
+        }
+        Vicinity {
+            score: m,
+            threshold: 4.5 * n as f32 * self.accept_ratio,
+            pairs: n,
+            short,
+            long,
+            through,
+        }
+    }
+}
+
+impl Vicinity {
+    /// `M - 4.5 short_weight short`: the vicinity score less a share of the
+    /// weight a hit has, for every beam that ends in front of where the map
+    /// has a surface. Such a beam is weak evidence against the pose (the
+    /// paper's M ignores it: people and clutter make them), not none: a pose
+    /// on the wrong map leaves many. 0 gives the paper's M.
+    pub fn evidence(&self, short_weight: f32) -> f32 {
+        self.score - 4.5 * short_weight * self.short as f32
+    }
+
+    /// True when at most `through_max` of the beams with a return went
+    /// through a wall (`through_max` 0 disables the test).
+    pub fn free_space_ok(&self, through_max: f32) -> bool {
+        through_max <= 0.0 || self.through as f32 <= through_max * self.pairs as f32
     }
 }

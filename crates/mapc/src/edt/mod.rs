@@ -321,3 +321,24 @@ impl DistanceField {
 
 #[cfg(test)]
 mod tests;
+
+/// Squared distances (cells^2) from every cell of a `w x h` grid to the
+/// nearest cell where `obst` is true, by brute force (O(cells x
+/// obstacles)): the reference the tests compare the transform with.
+/// [`no_obstacle_sq`] everywhere when there is no obstacle.
+#[doc(hidden)]
+pub fn brute_force_sq(w: usize, h: usize, obst: &[bool]) -> Vec<f32> {
+    let pts: Vec<(i64, i64)> = (0..w * h)
+        .filter(|&i| obst[i])
+        .map(|i| ((i % w) as i64, (i / w) as i64))
+        .collect();
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
+            pts.iter()
+                .map(|&(a, b)| (a - x) * (a - x) + (b - y) * (b - y))
+                .min()
+                .map_or(no_obstacle_sq(w, h), |d| d as f32)
+        })
+        .collect()
+}

@@ -1,21 +1,6 @@
+use super::brute_force_sq as brute;
 use super::*;
 use crate::rng::Rng;
-
-fn brute(w: usize, h: usize, obst: &[bool]) -> Vec<f32> {
-    let pts: Vec<(i64, i64)> = (0..w * h)
-        .filter(|&i| obst[i])
-        .map(|i| ((i % w) as i64, (i / w) as i64))
-        .collect();
-    (0..w * h)
-        .map(|i| {
-            let (x, y) = ((i % w) as i64, (i / w) as i64);
-            pts.iter()
-                .map(|&(a, b)| (a - x) * (a - x) + (b - y) * (b - y))
-                .min()
-                .map_or(no_obstacle_sq(w, h), |d| d as f32)
-        })
-        .collect()
-}
 
 fn check(w: usize, h: usize, obst: &[bool]) {
     let want = brute(w, h, obst);

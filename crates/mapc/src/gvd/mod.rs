@@ -185,6 +185,17 @@ pub fn distance_field(grid: &OccupancyGrid, opts: &GvdOptions) -> DistanceField 
 /// `unknown_is_obstacle` differs from the options', a matching field is
 /// computed here instead.
 pub fn extract(grid: &OccupancyGrid, dist: &DistanceField, opts: &GvdOptions) -> GvdGraph {
+    extract_with(grid, dist, opts, &mut |_| {})
+}
+
+/// As [`extract`], calling `lap(step)` at the end of each step
+/// ("gvd.specks", "gvd.thin", ...) so that the caller can time them.
+pub fn extract_with(
+    grid: &OccupancyGrid,
+    dist: &DistanceField,
+    opts: &GvdOptions,
+    lap: &mut dyn FnMut(&'static str),
+) -> GvdGraph {
     let own;
     let dist = if dist.unknown_is_obstacle == opts.unknown_is_obstacle
         && dist.width == grid.width
@@ -220,17 +231,20 @@ pub fn extract(grid: &OccupancyGrid, dist: &DistanceField, opts: &GvdOptions) ->
         }
         None => dist,
     };
+    lap("gvd.specks");
     let mut sk = Skeleton {
         w,
         mask: candidates(gdist, opts),
         order: Vec::new(),
     };
     fill_empty_holes(&mut sk.mask, gdist, w, h);
+    lap("gvd.candidates");
     sk.order = (0..w * h)
         .filter(|&i| sk.mask[i] != 0)
         .map(|i| i as u32)
         .collect();
     sk.thin();
+    lap("gvd.thin");
 
     let r = (opts.robot_radius_m / res).max(0.0);
     let fields = Fields {
@@ -249,8 +263,11 @@ pub fn extract(grid: &OccupancyGrid, dist: &DistanceField, opts: &GvdOptions) ->
     if sk.remove_small_components(&raw, &fields, opts.min_component_m) {
         sk.thin();
     }
+    lap("gvd.prune");
     let raw = sk.extract(gdist);
-    raw.into_graph(grid, dist, &sk)
+    let graph = raw.into_graph(grid, dist, &sk);
+    lap("gvd.graph");
+    graph
 }
 
 /// The distance fields the pruning looks at.
@@ -494,6 +511,67 @@ fn fill_empty_holes(mask: &mut [u8], dist: &DistanceField, w: usize, h: usize) {
     }
 }
 
+/// A set of cell indices, one bit per grid cell: membership tests along
+/// skeleton paths touch neighbouring words, where a hash set of a large
+/// map's million skeleton cells misses the cache on nearly every test.
+struct CellBits(Vec<u64>);
+
+impl CellBits {
+    /// An empty set for cells `0..n`.
+    fn new(n: usize) -> Self {
+        CellBits(vec![0; n.div_ceil(64)])
+    }
+
+    #[inline]
+    fn contains(&self, i: &u32) -> bool {
+        (self.0[*i as usize / 64] >> (i % 64)) & 1 == 1
+    }
+
+    /// Adds `i`; true when it was not in the set.
+    #[inline]
+    fn insert(&mut self, i: u32) -> bool {
+        let (w, bit) = (i as usize / 64, 1u64 << (i % 64));
+        let new = self.0[w] & bit == 0;
+        self.0[w] |= bit;
+        new
+    }
+}
+
+/// Node id of a skeleton cell, for the few cells that belong to a node: a
+/// bit per cell answers most lookups without touching the map.
+struct NodeOf {
+    bits: CellBits,
+    map: HashMap<u32, usize>,
+}
+
+impl NodeOf {
+    fn new(n: usize) -> Self {
+        NodeOf {
+            bits: CellBits::new(n),
+            map: HashMap::new(),
+        }
+    }
+
+    #[inline]
+    fn contains_key(&self, c: &u32) -> bool {
+        self.bits.contains(c)
+    }
+
+    #[inline]
+    fn get(&self, c: &u32) -> Option<&usize> {
+        if self.bits.contains(c) {
+            self.map.get(c)
+        } else {
+            None
+        }
+    }
+
+    fn insert(&mut self, c: u32, id: usize) {
+        self.bits.insert(c);
+        self.map.insert(c, id);
+    }
+}
+
 /// The skeleton being thinned and pruned.
 struct Skeleton {
     w: usize,
@@ -595,7 +673,7 @@ impl Skeleton {
     /// Builds the raw graph of the current skeleton.
     fn extract(&self, dist: &DistanceField) -> RawGraph {
         let cells = self.cells_by_index();
-        let mut node_of: HashMap<u32, usize> = HashMap::new();
+        let mut node_of = NodeOf::new(self.mask.len());
         let mut nodes: Vec<RawNode> = Vec::new();
         let degree = |i: u32| self.config(i as usize).count_ones();
         // Nodes: clusters of junction cells (>= 3 neighbours) and end points.
@@ -640,7 +718,7 @@ impl Skeleton {
             }
         }
         // Edges traced from every node.
-        let mut visited: HashSet<u32> = HashSet::new();
+        let mut visited = CellBits::new(self.mask.len());
         let mut edges: Vec<RawEdge> = Vec::new();
         let mut direct: HashSet<(usize, usize)> = HashSet::new();
         for a in 0..nodes.len() {
@@ -855,12 +933,15 @@ impl Skeleton {
         }
         // Cells that belong to no node nor edge (isolated cells, blobs
         // without exits) go too.
-        let covered: HashSet<u32> = g
+        let mut covered = CellBits::new(self.mask.len());
+        for &c in g
             .nodes
             .iter()
-            .flat_map(|n| n.cells.iter().copied())
-            .chain(g.edges.iter().flat_map(|e| e.path.iter().copied()))
-            .collect();
+            .flat_map(|n| n.cells.iter())
+            .chain(g.edges.iter().flat_map(|e| e.path.iter()))
+        {
+            covered.insert(c);
+        }
         for &c in &self.order {
             if self.mask[c as usize] != 0 && !covered.contains(&c) {
                 self.mask[c as usize] = 0;

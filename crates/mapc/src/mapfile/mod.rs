@@ -830,28 +830,64 @@ fn parse_description(path: &Path, text: &str) -> Result<Description, MapError> {
     })
 }
 
+/// Memory the decoders may use besides the pixel buffer (row buffers,
+/// compressed and ancillary chunk data), in bytes.
+const DECODER_WORKSPACE: u64 = 64 << 20;
+
+/// Bits per pixel of a PNG's raw scanlines, from its `IHDR` (colour type and
+/// bit depth); 1, the least any PNG uses, when the header cannot be read.
+fn png_bits_per_pixel(bytes: &[u8]) -> u64 {
+    if bytes.get(12..16) != Some(&b"IHDR"[..]) {
+        return 1;
+    }
+    let (Some(&depth), Some(&colour)) = (bytes.get(24), bytes.get(25)) else {
+        return 1;
+    };
+    let channels = match colour {
+        0 | 3 => 1, // grey; palette index
+        4 => 2,     // grey + alpha
+        2 => 3,     // RGB
+        6 => 4,     // RGBA
+        _ => 1,
+    };
+    (channels * depth as u64).max(1)
+}
+
 /// A cheap lower bound on the file size an image of `width x height` needs,
-/// so that a tiny file claiming a huge image is refused before the decoder
-/// allocates the pixel buffer. Never rejects a valid file.
-fn minimum_file_bytes(bytes: &[u8], width: u64, height: u64) -> u64 {
+/// so that a small file claiming a huge image is refused before the pixel
+/// buffer (`decoded_bytes`, the decoder's output) is allocated. Never
+/// rejects a valid file.
+fn minimum_file_bytes(bytes: &[u8], width: u64, height: u64, decoded_bytes: u64) -> u64 {
     let cells = width * height;
     match bytes.get(..2) {
+        // Plain (ASCII) formats: a digit per sample, separated from the
+        // next one (P1 needs no separator).
         Some(b"P1") => cells,
         Some(b"P2") => 2 * cells - 1,
         Some(b"P3") => 6 * cells - 1,
         Some(b"P4") => height * width.div_ceil(8),
-        Some(b"P5") | Some(b"P7") => cells,
-        Some(b"P6") => 3 * cells,
-        // PNG: deflate cannot compress better than 1032:1, and the raw
-        // scanlines hold at least one bit per pixel.
-        Some(b"\x89P") => cells.div_ceil(8) / 1032,
+        // Binary samples of 1 or 2 bytes, stored as the decoder outputs them.
+        Some(b"P5") | Some(b"P6") | Some(b"P7") => decoded_bytes,
+        // PNG: the raw scanlines hold the bits per pixel the header
+        // declares (colour type x bit depth, up to 64), and deflate cannot
+        // compress better than 1032:1. So the decoded buffer is at most
+        // 1032 x 32 (a 1-bit palette expanded to RGBA) times the file.
+        Some(b"\x89P") => (cells * png_bits_per_pixel(bytes)).div_ceil(8) / 1032,
         _ => 0,
     }
 }
 
 /// Decodes the image and classifies its pixels; returns the cells in grid
 /// order, the dimensions and the SHA-256 of the file.
+///
+/// Memory: the header is read first; the dimensions must be within
+/// [`MAX_SIDE`] / [`MAX_CELLS`] and the file large enough for the pixels it
+/// declares ([`minimum_file_bytes`]) before the pixel buffer (the decoder's
+/// output: width x height x channels x 1 or 2 bytes) is allocated, and that
+/// allocation is fallible (an error, not an abort, when it cannot be had).
+/// The decoders' own working memory is capped at [`DECODER_WORKSPACE`].
 fn load_pixels(path: &Path, params: &Params) -> Result<(Vec<Cell>, u32, u32, [u8; 32]), MapError> {
+    use image::{ColorType, ImageDecoder};
     let bytes = std::fs::read(path).map_err(|source| MapError::Io {
         path: path.to_path_buf(),
         source,
@@ -861,18 +897,22 @@ fn load_pixels(path: &Path, params: &Params) -> Result<(Vec<Cell>, u32, u32, [u8
         path: path.to_path_buf(),
         message,
     };
-    let reader = || {
-        image::ImageReader::new(Cursor::new(&bytes[..]))
-            .with_guessed_format()
-            .map_err(|e| decode_err(e.to_string()))
-    };
-    let r = reader()?;
+    let mut r = image::ImageReader::new(Cursor::new(&bytes[..]))
+        .with_guessed_format()
+        .map_err(|e| decode_err(e.to_string()))?;
     if r.format().is_none() {
         return Err(decode_err(
             "unrecognized image format (PGM/PNM and PNG are supported)".into(),
         ));
     }
-    let (width, height) = r.into_dimensions().map_err(|e| decode_err(e.to_string()))?;
+    // No dimension limits here (the check below gives the typed
+    // `ImageTooLarge`); the pixel buffer is allocated by this function, not
+    // by the decoder, so `max_alloc` only bounds the decoder's working memory.
+    let mut limits = image::Limits::no_limits();
+    limits.max_alloc = Some(DECODER_WORKSPACE);
+    r.limits(limits);
+    let decoder = r.into_decoder().map_err(|e| decode_err(e.to_string()))?;
+    let (width, height) = decoder.dimensions();
     if width == 0 || height == 0 {
         return Err(decode_err(format!("image is {width} x {height} pixels")));
     }
@@ -883,45 +923,76 @@ fn load_pixels(path: &Path, params: &Params) -> Result<(Vec<Cell>, u32, u32, [u8
             height,
         });
     }
-    let need = minimum_file_bytes(&bytes, width as u64, height as u64);
+    let (channels, sample_bytes, has_alpha) = match decoder.color_type() {
+        ColorType::L8 => (1, 1, false),
+        ColorType::La8 => (2, 1, true),
+        ColorType::Rgb8 => (3, 1, false),
+        ColorType::Rgba8 => (4, 1, true),
+        ColorType::L16 => (1, 2, false),
+        ColorType::La16 => (2, 2, true),
+        ColorType::Rgb16 => (3, 2, false),
+        ColorType::Rgba16 => (4, 2, true),
+        other => {
+            return Err(decode_err(format!(
+                "unsupported pixel format {other:?} (8 or 16 bits per channel expected)"
+            )))
+        }
+    };
+    let decoded = width as u64 * height as u64 * channels * sample_bytes;
+    if decoder.total_bytes() != decoded {
+        return Err(decode_err(format!(
+            "the decoder reports {} bytes for {width} x {height} pixels of {channels} x {sample_bytes} bytes",
+            decoder.total_bytes()
+        )));
+    }
+    let need = minimum_file_bytes(&bytes, width as u64, height as u64, decoded);
     if (bytes.len() as u64) < need {
         return Err(decode_err(format!(
-            "truncated: the header claims {width} x {height} pixels but the file has only {} bytes",
+            "truncated: the header claims {width} x {height} pixels but the file has only {} \
+             bytes, fewer than the {need} they need at least",
             bytes.len()
         )));
     }
-    let mut r = reader()?;
-    let mut limits = image::Limits::default();
-    limits.max_image_width = Some(MAX_SIDE);
-    limits.max_image_height = Some(MAX_SIDE);
-    // Up to 4 channels of 16 bits, plus decoder working space.
-    limits.max_alloc = Some(width as u64 * height as u64 * 8 + (64 << 20));
-    r.limits(limits);
-    let img = r.decode().map_err(|e| decode_err(e.to_string()))?;
-    let cells = classify(img, params);
+    let no_memory = || {
+        decode_err(format!(
+            "not enough memory for the {decoded} bytes of {width} x {height} decoded pixels"
+        ))
+    };
+    let len = usize::try_from(decoded).map_err(|_| no_memory())?;
+    // Fallible: a size the allocator cannot provide is an error, not an
+    // abort. Probed with `try_reserve_exact`, then allocated zeroed (calloc:
+    // pages the decoder never writes, when the data turns out to be cut off,
+    // are never touched).
+    let mut probe: Vec<u8> = Vec::new();
+    probe.try_reserve_exact(len).map_err(|_| no_memory())?;
+    drop(probe);
+    let mut samples = vec![0u8; len];
+    decoder
+        .read_image(&mut samples)
+        .map_err(|e| decode_err(e.to_string()))?;
+    if sample_bytes == 2 {
+        narrow_16_to_8(&mut samples);
+    }
+    let cells = classify(
+        &samples,
+        width as usize,
+        height as usize,
+        channels as usize,
+        has_alpha,
+        params,
+    );
     Ok((cells, width, height, sha))
 }
 
-/// Pixel samples as 8 bits per channel, with the channel count and whether
-/// the last channel is alpha.
-fn samples_u8(img: image::DynamicImage) -> (Vec<u8>, usize, bool) {
-    use image::DynamicImage as D;
-    fn down(v: &[u16]) -> Vec<u8> {
-        v.iter()
-            .map(|&x| ((x as u32 * 255 + 32767) / 65535) as u8)
-            .collect()
+/// 16-bit samples (native byte order, as the decoders output them) to
+/// 8 bits (`round(v * 255 / 65535)`), in place: the buffer halves.
+fn narrow_16_to_8(buf: &mut Vec<u8>) {
+    let n = buf.len() / 2;
+    for i in 0..n {
+        let v = u16::from_ne_bytes([buf[2 * i], buf[2 * i + 1]]);
+        buf[i] = ((v as u32 * 255 + 32767) / 65535) as u8;
     }
-    match img {
-        D::ImageLuma8(b) => (b.into_raw(), 1, false),
-        D::ImageLumaA8(b) => (b.into_raw(), 2, true),
-        D::ImageRgb8(b) => (b.into_raw(), 3, false),
-        D::ImageRgba8(b) => (b.into_raw(), 4, true),
-        D::ImageLuma16(b) => (down(b.as_raw()), 1, false),
-        D::ImageLumaA16(b) => (down(b.as_raw()), 2, true),
-        D::ImageRgb16(b) => (down(b.as_raw()), 3, false),
-        D::ImageRgba16(b) => (down(b.as_raw()), 4, true),
-        other => (other.to_rgba8().into_raw(), 4, true),
-    }
+    buf.truncate(n);
 }
 
 /// Classifies one pixel (8-bit channels, alpha last when `has_alpha`).
@@ -984,11 +1055,18 @@ fn threshold(occ: f64, params: &Params) -> Cell {
     }
 }
 
-/// Classifies all pixels and flips rows (image top row = grid row height-1).
-fn classify(img: image::DynamicImage, params: &Params) -> Vec<Cell> {
+/// Classifies all pixels (`w x h`, `ch` 8-bit channels each, alpha last
+/// when `has_alpha`, top image row first) and flips rows (image top row =
+/// grid row `h - 1`).
+fn classify(
+    samples: &[u8],
+    w: usize,
+    h: usize,
+    ch: usize,
+    has_alpha: bool,
+    params: &Params,
+) -> Vec<Cell> {
     use rayon::prelude::*;
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    let (samples, ch, has_alpha) = samples_u8(img);
     // A 256-entry table for the common single-channel case.
     let lut: Option<Vec<Cell>> = (ch == 1).then(|| {
         (0..=255u8)

@@ -512,20 +512,7 @@ fn huge_header_with_tiny_file() {
     assert!(matches!(e, MapError::ImageDecode { .. }), "{e}");
 }
 
-fn crc32(data: &[u8]) -> u32 {
-    let mut crc = 0xFFFF_FFFFu32;
-    for &b in data {
-        crc ^= b as u32;
-        for _ in 0..8 {
-            crc = if crc & 1 != 0 {
-                (crc >> 1) ^ 0xEDB8_8320
-            } else {
-                crc >> 1
-            };
-        }
-    }
-    !crc
-}
+use crate::testdata::png::{chunk, crc32};
 
 #[test]
 fn load_image_forms() {
@@ -669,5 +656,257 @@ fn every_shared_map_loads() {
         );
         assert!(g.free_count() > 1000);
         assert!(occ > 100);
+    }
+}
+
+// ---------------------------------------------------------------------------
+// PNG colour types and bit depths, and the memory bound from the header.
+
+/// A PNG (no interlace) of `w x h` pixels: `colour` and `depth` as in IHDR,
+/// `samples` one value per channel (palette index for colour type 3), each
+/// below `2^depth`, rows top first; `plte` / `trns` written when non-empty.
+fn png(
+    w: u32,
+    h: u32,
+    depth: u8,
+    colour: u8,
+    samples: &[u16],
+    plte: &[u8],
+    trns: &[u8],
+) -> Vec<u8> {
+    use std::io::Write as _;
+    let channels = match colour {
+        0 | 3 => 1,
+        4 => 2,
+        2 => 3,
+        _ => 4,
+    };
+    let per_row = w as usize * channels;
+    assert_eq!(samples.len(), per_row * h as usize);
+    let mut raw = Vec::new();
+    for row in samples.chunks(per_row) {
+        raw.push(0); // filter: none
+        if depth >= 8 {
+            for &v in row {
+                if depth == 16 {
+                    raw.extend_from_slice(&v.to_be_bytes());
+                } else {
+                    raw.push(v as u8);
+                }
+            }
+        } else {
+            let mut bits = 0u32;
+            let mut n = 0;
+            for &v in row {
+                bits = (bits << depth) | v as u32;
+                n += depth as u32;
+                if n == 8 {
+                    raw.push(bits as u8);
+                    (bits, n) = (0, 0);
+                }
+            }
+            if n > 0 {
+                raw.push((bits << (8 - n)) as u8);
+            }
+        }
+    }
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+    z.write_all(&raw).unwrap();
+    let idat = z.finish().unwrap();
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = w.to_be_bytes().to_vec();
+    ihdr.extend_from_slice(&h.to_be_bytes());
+    ihdr.extend_from_slice(&[depth, colour, 0, 0, 0]);
+    chunk(&mut out, b"IHDR", &ihdr);
+    if !plte.is_empty() {
+        chunk(&mut out, b"PLTE", plte);
+    }
+    if !trns.is_empty() {
+        chunk(&mut out, b"tRNS", trns);
+    }
+    chunk(&mut out, b"IDAT", &idat);
+    chunk(&mut out, b"IEND", &[]);
+    out
+}
+
+/// Every PNG colour type and bit depth decodes to the cells its 8-bit
+/// equivalent gives: low depths are scaled up (1-bit 1 is 255), 16-bit
+/// samples are narrowed as `round(v * 255 / 65535)` whatever the byte
+/// order, palettes are expanded (with tRNS alpha when present).
+#[test]
+fn png_every_colour_type_and_depth() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("p.png");
+    let params = Params {
+        negate: false,
+        occupied_thresh: DEFAULT_OCCUPIED_THRESH,
+        free_thresh: DEFAULT_FREE_THRESH,
+        mode: Mode::Trinary,
+    };
+    let (w, h) = (4u32, 2u32);
+    // Grey levels (8-bit) in image order, all multiples of 85 so that 2- and
+    // 4-bit images hold them exactly; 1-bit images use only 0 and 255.
+    let grey = [0u16, 255, 170, 85, 255, 255, 0, 170];
+    let grey1 = [0u16, 255, 255, 0, 255, 255, 0, 255];
+    let alpha = [255u16, 255, 0, 255, 128, 255, 255, 255];
+    let load = |bytes: &[u8]| {
+        fs::write(&path, bytes).unwrap();
+        load_image(&path, Some(0.1), None)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .grid
+    };
+    // The cells of an image whose 8-bit pixels (rows top first) are `px`.
+    let expect = |px: &[Vec<u8>], has_alpha: bool| -> Vec<Cell> {
+        let mut cells = Vec::new();
+        for row in px.chunks(w as usize).rev() {
+            cells.extend(row.iter().map(|p| classify_pixel(p, has_alpha, &params)));
+        }
+        cells
+    };
+    let mut checked = 0;
+    for depth in [1u8, 2, 4, 8, 16] {
+        let max = (1u32 << depth) - 1;
+        let levels: &[u16] = if depth == 1 { &grey1 } else { &grey };
+        let to = |v8: u16| (v8 as u32 * max / 255) as u16;
+        // Grey.
+        let s: Vec<u16> = levels.iter().map(|&v| to(v)).collect();
+        let g = load(&png(w, h, depth, 0, &s, &[], &[]));
+        let px: Vec<Vec<u8>> = levels.iter().map(|&v| vec![v as u8]).collect();
+        assert_eq!(g.cells, expect(&px, false), "grey {depth}");
+        checked += 1;
+        // Palette (depths up to 8): index k has grey level levels[k], with
+        // and without per-entry alpha.
+        if depth <= 8 {
+            let n = levels.len().min(1 << depth);
+            let plte: Vec<u8> = levels[..n].iter().flat_map(|&v| [v as u8; 3]).collect();
+            let idx: Vec<u16> = (0..levels.len()).map(|k| (k % n) as u16).collect();
+            let g = load(&png(w, h, depth, 3, &idx, &plte, &[]));
+            let px: Vec<Vec<u8>> = idx
+                .iter()
+                .map(|&k| vec![levels[k as usize] as u8; 3])
+                .collect();
+            assert_eq!(g.cells, expect(&px, false), "palette {depth}");
+            let trns: Vec<u8> = alpha[..n].iter().map(|&a| a as u8).collect();
+            let g = load(&png(w, h, depth, 3, &idx, &plte, &trns));
+            let px: Vec<Vec<u8>> = idx
+                .iter()
+                .map(|&k| {
+                    let v = levels[k as usize] as u8;
+                    vec![v, v, v, alpha[k as usize] as u8]
+                })
+                .collect();
+            assert_eq!(g.cells, expect(&px, true), "palette {depth} with tRNS");
+            checked += 2;
+        }
+        // Grey + alpha, RGB, RGBA: depths 8 and 16.
+        if depth >= 8 {
+            let wide = |v: u16| if depth == 16 { v * 257 } else { v };
+            let s: Vec<u16> = (0..8)
+                .flat_map(|i| [wide(grey[i]), wide(alpha[i])])
+                .collect();
+            let g = load(&png(w, h, depth, 4, &s, &[], &[]));
+            let px: Vec<Vec<u8>> = (0..8)
+                .map(|i| vec![grey[i] as u8, alpha[i] as u8])
+                .collect();
+            assert_eq!(g.cells, expect(&px, true), "grey+alpha {depth}");
+            // RGB with unequal channels: (v, v / 2 + 127, v).
+            let rgb = |i: usize| [grey[i], grey[i] / 2 + 127, grey[i]];
+            let s: Vec<u16> = (0..8).flat_map(|i| rgb(i).map(wide)).collect();
+            let g = load(&png(w, h, depth, 2, &s, &[], &[]));
+            let px: Vec<Vec<u8>> = (0..8).map(|i| rgb(i).map(|v| v as u8).to_vec()).collect();
+            assert_eq!(g.cells, expect(&px, false), "rgb {depth}");
+            let s: Vec<u16> = (0..8)
+                .flat_map(|i| {
+                    let [r, g, b] = rgb(i);
+                    [r, g, b, alpha[i]].map(wide)
+                })
+                .collect();
+            let g = load(&png(w, h, depth, 6, &s, &[], &[]));
+            let px: Vec<Vec<u8>> = (0..8)
+                .map(|i| {
+                    let [r, g, b] = rgb(i);
+                    vec![r as u8, g as u8, b as u8, alpha[i] as u8]
+                })
+                .collect();
+            assert_eq!(g.cells, expect(&px, true), "rgba {depth}");
+            checked += 3;
+        }
+    }
+    assert_eq!(checked, 5 + 2 * 4 + 3 * 2);
+    // 16-bit rounding: 52685 -> 205 (unknown), 65535 -> 255, 128 -> 0 (not 1).
+    let g = load(&png(3, 1, 16, 0, &[52685, 65535, 128], &[], &[]));
+    assert_eq!(g.cells, [Cell::Unknown, Cell::Free, Cell::Occupied]);
+}
+
+/// A PNG's header declares the raw bits per pixel (colour type x bit
+/// depth); the file must be at least `width * height * bits / 8 / 1032`
+/// bytes (deflate's best ratio) or it is refused as truncated before the
+/// pixel buffer is allocated (fuzz finding `png-rgba16-header-4gib-alloc`:
+/// a 64 KB file claiming 23000 x 23000 RGBA16, 4.2 GB decoded). Files
+/// just large enough are decoded (and fail on the cut-off data).
+#[test]
+fn png_header_size_needs_a_file_to_match() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("h.png");
+    // (colour type, bit depth, bits per pixel)
+    let kinds = [
+        (0u8, 1u8, 1u64),
+        (3, 1, 1),
+        (0, 8, 8),
+        (3, 8, 8),
+        (0, 16, 16),
+        (4, 8, 16),
+        (2, 8, 24),
+        (6, 8, 32),
+        (4, 16, 32),
+        (2, 16, 48),
+        (6, 16, 64),
+    ];
+    for (colour, depth, bits) in kinds {
+        // A valid 1 x 1 image of this kind, then IHDR patched to `side` x
+        // `side` (CRC fixed): its IDAT is far too short for that.
+        let channels = match colour {
+            4 => 2,
+            2 => 3,
+            6 => 4,
+            _ => 1,
+        };
+        let plte: &[u8] = if colour == 3 {
+            &[0, 0, 0, 255, 255, 255]
+        } else {
+            &[]
+        };
+        let one_pixel = png(1, 1, depth, colour, &vec![0; channels], plte, &[]);
+        for side in [1000u32, 23000, 46000] {
+            let mut file = one_pixel.clone();
+            file[16..20].copy_from_slice(&side.to_be_bytes());
+            file[20..24].copy_from_slice(&side.to_be_bytes());
+            let crc = crc32(&file[12..29]);
+            file[29..33].copy_from_slice(&crc.to_be_bytes());
+            let need = (side as u64 * side as u64 * bits).div_ceil(8) / 1032;
+            // Just too short: refused from the header. Just long enough
+            // (padding after IEND): decoded, and then the data is cut off;
+            // tried only where the pixel buffer is small (this allocates it).
+            let decoded =
+                side as u64 * side as u64 * bits.max(8) / 8 * if colour == 3 { 3 } else { 1 };
+            let mut lens = vec![need - 1];
+            if decoded <= 64 << 20 {
+                lens.push(need + 1);
+            }
+            for len in lens {
+                let mut f = file.clone();
+                assert!(f.len() as u64 <= len, "{} > {len}", f.len());
+                f.resize(len as usize, 0);
+                fs::write(&path, &f).unwrap();
+                let e = load_image(&path, Some(0.1), None).unwrap_err();
+                assert!(matches!(e, MapError::ImageDecode { .. }), "{e}");
+                let truncated = e.to_string().contains("truncated: the header claims");
+                assert_eq!(
+                    truncated,
+                    len < need,
+                    "colour {colour} depth {depth} side {side}, {len} bytes (need {need}): {e}"
+                );
+            }
+        }
     }
 }

@@ -641,28 +641,47 @@ fn range_max_from_opts(opts: &ReadOptions) -> Result<f32, String> {
 /// Largest |angle| (rad) accepted for a first bearing or a step.
 const ANGLE_LIMIT: f64 = TAU + 1e-3;
 
-/// Checks that `n` beams starting at `angle_min` with step `inc` make at
-/// most one turn. `names` are the two fields as the input calls them.
-fn check_angles(angle_min: f64, inc: f64, n: usize, names: [&str; 2]) -> Result<(), String> {
+/// The first bearing and step as the scan stores them (f32), checked: both
+/// finite, the step non-zero, `|angle_min|` within [`ANGLE_LIMIT`], and `n`
+/// beams spanning at most one turn. `names` are the two fields as the input
+/// calls them.
+///
+/// The checks are made on the f32 values, not on the f64 ones read: near a
+/// limit the two can fall on different sides of it (6.2841853 is inside
+/// 2 pi + 1e-3, its f32 6.2841854 is not), and the record
+/// [`scan_to_json`] writes from the f32 values must read back.
+fn stored_angles(
+    angle_min: f64,
+    inc: f64,
+    n: usize,
+    names: [&str; 2],
+) -> Result<(f32, f32), String> {
     let [min_name, inc_name] = names;
-    if !angle_min.is_finite() || angle_min.abs() > ANGLE_LIMIT {
-        return Err(format!(
-            "{min_name} ({angle_min}) is not a finite angle within [-2 pi, 2 pi] rad"
-        ));
-    }
+    let (min32, inc32) = (angle_min as f32, inc as f32);
     if !inc.is_finite() {
         return Err(format!("{inc_name} is not finite"));
     }
     if inc == 0.0 {
         return Err(format!("{inc_name} is 0"));
     }
+    if !inc32.is_finite() || inc32 == 0.0 {
+        return Err(format!(
+            "{inc_name} ({inc}) is out of the range of a 32-bit float (rounds to {inc32})"
+        ));
+    }
+    let (angle_min, inc) = (min32 as f64, inc32 as f64);
+    if !angle_min.is_finite() || angle_min.abs() > ANGLE_LIMIT {
+        return Err(format!(
+            "{min_name} ({min32}) is not a finite angle within [-2 pi, 2 pi] rad"
+        ));
+    }
     let span = n.saturating_sub(1) as f64 * inc.abs();
     if span > TAU * (1.0 + 1e-4) + 1e-6 {
         return Err(format!(
-            "{n} beams at angle_increment {inc} rad span {span:.4} rad, more than a full turn"
+            "{n} beams at angle_increment {inc32} rad span {span:.4} rad, more than a full turn"
         ));
     }
-    Ok(())
+    Ok((min32, inc32))
 }
 
 // ---------------------------------------------------------------------------
@@ -827,12 +846,14 @@ fn build_json_scan(
             if ranges.is_empty() {
                 return Err("ranges is empty".into());
             }
-            check_angles(
+            let (min32, inc32) = stored_angles(
                 angle_min,
                 inc,
                 ranges.len(),
                 ["angle_min", "angle_increment"],
             )?;
+            // From here on, the values the scan keeps.
+            let (angle_min, inc) = (min32 as f64, inc32 as f64);
             if let Some(angle_max) = raw.angle_max {
                 let expected = angle_min + (ranges.len() - 1) as f64 * inc;
                 // Loose: some drivers write angle_min + n * increment.
@@ -861,8 +882,8 @@ fn build_json_scan(
                 }
             }
             ScanData::Ranges {
-                angle_min: angle_min as f32,
-                angle_increment: inc as f32,
+                angle_min: min32,
+                angle_increment: inc32,
                 range_min,
                 range_max,
                 ranges,
@@ -1596,6 +1617,9 @@ fn parse_old_laser(
     };
     let inc = carmen_angle_increment(n, fov);
     let angle_min = if rear { PI - fov / 2.0 } else { -fov / 2.0 };
+    // The same checks as for the other records (a field of view override
+    // just over a turn spreads the beams over more than one).
+    let (angle_min, inc) = stored_angles(angle_min, inc, n, ["first bearing", "beam spacing"])?;
     let max = match param_max {
         Some(m) => m,
         None => range_max_from_opts(opts)?,
@@ -1603,8 +1627,8 @@ fn parse_old_laser(
     let ranges = parse_ranges(&mut it, n, max, name)?;
     let pose = parse_pose(&mut it, name, "laser pose")?;
     let data = ScanData::Ranges {
-        angle_min: angle_min as f32,
-        angle_increment: inc as f32,
+        angle_min,
+        angle_increment: inc,
         range_min: 0.0,
         range_max: max,
         ranges,
@@ -1643,7 +1667,7 @@ fn parse_robot_laser(
             n.saturating_add(7)
         ));
     }
-    check_angles(
+    let (start, inc) = stored_angles(
         start,
         inc,
         n,
@@ -1673,8 +1697,8 @@ fn parse_robot_laser(
     }
     let pose = parse_pose(&mut it, name, "laser pose")?;
     let data = ScanData::Ranges {
-        angle_min: start as f32,
-        angle_increment: inc as f32,
+        angle_min: start,
+        angle_increment: inc,
         range_min: 0.0,
         range_max: max,
         ranges,

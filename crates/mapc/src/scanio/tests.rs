@@ -986,6 +986,114 @@ fn scan_to_json_round_trips_ranges() {
     assert!(v["ranges"][3].is_null());
 }
 
+/// The angle limits hold for the f32 values a scan keeps, not only for the
+/// f64 values read (fuzz findings `angle-min-f32-rounds-past-limit` and
+/// `increment-f32-rounds-past-full-turn`): every record accepted near a
+/// limit reads back from its `scan_to_json`, and values that only pass in
+/// f64 are rejected naming the field.
+#[test]
+fn angles_are_checked_as_stored_f32() {
+    let record = |amin: &str, inc: &str, n: usize| {
+        let ranges = vec!["1"; n].join(",");
+        format!(r#"{{"angle_min":{amin},"angle_increment":{inc},"ranges":[{ranges}]}}"#)
+    };
+    let round_trips = |s: &InputScan| {
+        let back = one(
+            &scan_to_json(&s.data, &s.id, s.truth),
+            InputFormat::JsonLines,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(back.data, s.data);
+    };
+    // angle_min: 6.2841853 is inside 2 pi + 1e-3 in f64, its f32 is not.
+    let e = err(&record("6.2841853", "1", 1), InputFormat::JsonLines);
+    assert!(e.message.starts_with("angle_min (6.2841854)"), "{e}");
+    let e = err(&record("-6.2841853", "1", 1), InputFormat::JsonLines);
+    assert!(e.message.starts_with("angle_min"), "{e}");
+    // The largest f32 inside the limit is accepted and reads back.
+    let limit = std::f64::consts::TAU + 1e-3;
+    let mut inside = limit as f32;
+    if inside as f64 > limit {
+        inside = f32::from_bits(inside.to_bits() - 1);
+    }
+    for amin in [inside, -inside] {
+        round_trips(
+            &one(
+                &record(&format!("{amin:?}"), "1", 1),
+                InputFormat::JsonLines,
+            )
+            .unwrap(),
+        );
+    }
+    // The span: 4 beams at increments around a third of the limit, in f64
+    // steps finer than an f32 ulp. Accepted ones read back, and the
+    // finding's value is rejected.
+    let e = err(
+        &record("0", "2.0946048752367683", 4),
+        InputFormat::JsonLines,
+    );
+    assert!(e.message.contains("more than a full turn"), "{e}");
+    let (mut accepted, mut rejected) = (0, 0);
+    for k in -40..40 {
+        let inc = 2.0946048752367683 + k as f64 * 3e-8;
+        for sign in [1.0, -1.0] {
+            match one(
+                &record("0", &format!("{:?}", sign * inc), 4),
+                InputFormat::JsonLines,
+            ) {
+                Ok(s) => {
+                    round_trips(&s);
+                    accepted += 1;
+                }
+                Err(e) => {
+                    assert!(e.message.contains("more than a full turn"), "{e}");
+                    rejected += 1;
+                }
+            }
+        }
+    }
+    assert!(accepted > 0 && rejected > 0, "{accepted} / {rejected}");
+    // An increment that is 0 or infinite as f32 is rejected, not stored.
+    for inc in ["1e-50", "-1e-46"] {
+        let e = err(&record("0", inc, 2), InputFormat::JsonLines);
+        assert!(e.message.contains("32-bit float (rounds to"), "{inc}: {e}");
+    }
+    let e = err(&record("0", "1e300", 1), InputFormat::JsonLines);
+    assert!(e.message.contains("32-bit float (rounds to inf)"), "{e}");
+    // ROBOTLASER1: the same checks on start_angle / angular_resolution.
+    let robot = |start: &str, inc: &str| {
+        format!("ROBOTLASER1 0 {start} 3.14 {inc} 30 0.01 0 2 1 1 0 0 0 0 0 0 0 0 0 0 0 0 1 h 2")
+    };
+    let e = err(&robot("6.2841853", "0.01"), InputFormat::Carmen);
+    assert!(e.message.contains("start_angle (6.2841854)"), "{e}");
+    let e = err(&robot("0", "1e-50"), InputFormat::Carmen);
+    assert!(e.message.contains("angular_resolution"), "{e}");
+    round_trips(&one(&robot("-1.57", "0.01"), InputFormat::Carmen).unwrap());
+    // FLASER with a field of view override just over a turn (allowed up to
+    // 2 pi + 1e-3): the beams would span more than the reader accepts back.
+    let opts = ReadOptions {
+        fov: Some((std::f64::consts::TAU + 9e-4) as f32),
+        ..ReadOptions::default()
+    };
+    let v = read_all(
+        flaser(1000, 2.0, "0 0 0").as_bytes(),
+        InputFormat::Carmen,
+        &opts,
+    );
+    let e = v[0].as_ref().unwrap_err();
+    assert!(e.message.contains("more than a full turn"), "{e}");
+    let opts = ReadOptions {
+        fov: Some(std::f32::consts::TAU),
+        ..ReadOptions::default()
+    };
+    let v = read_all(
+        flaser(1000, 2.0, "0 0 0").as_bytes(),
+        InputFormat::Carmen,
+        &opts,
+    );
+    round_trips(v[0].as_ref().unwrap());
+}
+
 #[test]
 fn scan_to_json_round_trips_points() {
     let data = ScanData::Points {

@@ -321,8 +321,20 @@ pub struct ParamsRecord {
     /// SSM: most stored affinity entries per match (8 bytes each in the
     /// scratch; the main term of `scratch_size`).
     pub affinity_cap: U32,
+    /// Free-space check: most beams through a wall, as a share of the beams
+    /// with a return (0: off). Added within version 1 in a field that was
+    /// reserved and zero, so older files read as "off".
+    pub through_max: F32,
+    /// Free-space check: least excess range (m) of a beam through a wall.
+    pub through_excess: F32,
+    /// Verification: weight of a short beam against the pose, as a share of
+    /// a hit's (0: the paper's M). Added within version 1 like `through_max`.
+    pub short_weight: F32,
+    /// Free-space check: least run of consecutive beams through a wall that
+    /// counts. Added within version 1 like `through_max`.
+    pub through_run: U32,
     /// Zero.
-    pub reserved: [U32; 5],
+    pub reserved: [U32; 1],
 }
 
 /// The number of padding bytes that bring `len` to a multiple of [`SECTION_ALIGN`].

@@ -24,6 +24,10 @@ pub struct Args {
     /// a YAML: "x,y,yaw" (m, m, rad).
     #[arg(long, value_name = "X,Y,YAW", value_parser = parse_triple, allow_hyphen_values = true)]
     pub origin: Option<[f64; 3]>,
+    /// Print every step's wall-clock time, process CPU time and the peak
+    /// resident set after it (Linux) on stderr, even with --quiet.
+    #[arg(long)]
+    pub timings: bool,
     #[command(flatten)]
     pub opts: BuildOpts,
 }
@@ -89,6 +93,15 @@ pub struct BuildOpts {
     /// Most stored SSM affinity entries per match (8 bytes of robot RAM each; the main part of the scratch).
     #[arg(long)]
     pub affinity_cap: Option<u32>,
+    /// Free-space check: reject a pose when more than this share of the beams pass through a wall of the map (0: off).
+    #[arg(long, value_name = "SHARE")]
+    pub through_max: Option<f32>,
+    /// Weight of a beam that ends short of the map's surface against the pose, as a share of a hit's (0: the paper's M).
+    #[arg(long, value_name = "SHARE")]
+    pub short_weight: Option<f32>,
+    /// Free-space check: beams through a wall count only in runs of at least this many consecutive beams.
+    #[arg(long, value_name = "BEAMS")]
+    pub through_run: Option<u32>,
 }
 
 impl BuildOpts {
@@ -117,6 +130,9 @@ impl BuildOpts {
             early_min: self.early_min.unwrap_or(d.early_min),
             ambiguity_ratio: self.ambiguity_ratio.unwrap_or(d.ambiguity_ratio),
             affinity_cap: self.affinity_cap.unwrap_or(d.affinity_cap),
+            through_max: self.through_max.unwrap_or(d.through_max),
+            short_weight: self.short_weight.unwrap_or(d.short_weight),
+            through_run: self.through_run.unwrap_or(d.through_run),
             fov_windows_deg: if self.fov_windows.trim() == "none" {
                 Vec::new()
             } else {
@@ -161,11 +177,18 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             .unwrap_or_else(|| "map".into());
         PathBuf::from(format!("{stem}.refdb"))
     });
+    // Fail now, not after minutes of compiling, when the result could not
+    // be saved (read-only or missing directory). Any existing file stays.
+    mapc::writer::check_writable(&out)
+        .map_err(|e| fail_err(anyhow::anyhow!("{}: cannot write: {e}", out.display())))?;
     let sp = ui.stage("loading map");
+    let mut laps = pipeline::Laps::start();
     let src = load_map(&a.map, a.resolution, a.origin).map_err(input_err)?;
+    laps.lap("load");
     sp.set_message("compiling");
-    let built = pipeline::build(&src, &cfg)
+    let mut built = pipeline::build(&src, &cfg)
         .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.map.display())))?;
+    laps.lap("build");
     sp.set_message("writing");
     let secs: Vec<_> = built
         .sections
@@ -174,6 +197,11 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         .collect();
     let size = mapc::writer::write_refdb(&out, &secs)
         .map_err(|e| fail_err(anyhow::anyhow!("{}: cannot write: {e}", out.display())))?;
+    laps.lap("write");
+    // The sections are in the file now: free them before the round trip
+    // maps the whole file (peak memory of large maps).
+    drop(secs);
+    built.sections = Vec::new();
     // Round-trip: the file we wrote must read back and verify.
     let db = crate::util::open_db(&out)?;
     db.verify().map_err(|e| {
@@ -182,7 +210,23 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             out.display()
         ))
     })?;
+    laps.lap("verify");
     sp.finish_and_clear();
+    if a.timings {
+        let mut steps = laps.into_steps();
+        // The pipeline's own steps replace the "build" lap.
+        if let Some(k) = steps.iter().position(|s| s.name == "build") {
+            steps.splice(k..=k, built.times.steps.iter().cloned());
+        }
+        eprintln!("  step              wall s     cpu s  peak RSS after (MiB)");
+        for s in &steps {
+            let cpu = s.cpu.map_or("-".into(), |c| format!("{c:.2}"));
+            let rss = s
+                .peak_rss
+                .map_or("-".into(), |b| format!("{:.1}", b as f64 / 1048576.0));
+            eprintln!("  {:<16} {:>7.3} {:>9} {:>10}", s.name, s.wall, cpu, rss);
+        }
+    }
     if !ui.quiet {
         let g = &src.grid;
         let res = g.resolution;

@@ -62,6 +62,9 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         early_min: None,
         ambiguity_ratio: None,
         affinity_cap: None,
+        through_max: None,
+        short_weight: None,
+        through_run: None,
     };
     let built = pipeline::build(&src, &opts.config()).map_err(|e| input_err(anyhow::anyhow!(e)))?;
     let stem = a
@@ -99,6 +102,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         foreign: None,
         out: a.out.clone(),
         no_figures: false,
+        dump: None,
         check: None,
         tol_rate: 0.02,
         tol_false_accept: 0.01,

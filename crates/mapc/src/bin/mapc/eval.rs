@@ -64,6 +64,13 @@ pub struct Args {
     /// Skip the PNG figures.
     #[arg(long)]
     pub no_figures: bool,
+    /// Also write the simulated inputs to DIR, for running other tools on
+    /// the same data: `<run>-scans.jsonl` (one LaserScan JSON line per E4
+    /// pose, readable by `mapc localize`) and `<run>-truth.txt` (the true
+    /// poses, for `--truth`) for each E4 run, and `e1-pairs.jsonl` (each E1
+    /// pair's points, true motion and this run's SSM error and time).
+    #[arg(long, value_name = "DIR")]
+    pub dump: Option<PathBuf>,
     /// Baseline report: exit 1 when this run is worse by more than the tolerances.
     #[arg(long, value_name = "BASELINE.json")]
     pub check: Option<PathBuf>,
@@ -203,6 +210,9 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
     .collect();
     let mut static_trials: Option<Vec<Trial>> = None;
     for (name, sp) in runs {
+        if let Some(dir) = &a.dump {
+            dump_e4(&db, &poses, &sp, a.seed, dir, name)?;
+        }
         let pb = ui.progress(poses.len() as u64, name);
         let tick = || pb.inc(1);
         let trials = eval::run_e4(&db, &poses, &sp, a.seed, None, &tick);
@@ -351,19 +361,37 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
         let done = AtomicU64::new(0);
         let pb = ui.progress(a.e1_trials as u64, "e1");
         let e1poses = eval::sample_poses(&db, a.e1_trials, a.clearance, a.seed ^ 0xE1);
+        let mut dumped: Vec<Value> = Vec::new();
         use rayon::prelude::*;
         let trials: Vec<eval::E1Trial> = e1poses
             .par_iter()
             .enumerate()
             .map(|(k, p)| {
                 let mut r = Rng::stream(a.seed ^ 0xE1E1, k as u64);
-                let t = eval::ssm_trial(&db, p, 0.010, 60, 0.4, 30f32.to_radians(), &mut r);
+                let pair = eval::e1_pair(&db, p, 0.010, 60, 0.4, 30f32.to_radians(), &mut r);
+                let t = eval::ssm_match_pair(&db, &pair);
                 done.fetch_add(1, Ordering::Relaxed);
                 pb.inc(1);
+                (t, a.dump.as_ref().map(|_| pair))
+            })
+            .collect::<Vec<_>>()
+            .into_iter()
+            .map(|(t, pair)| {
+                if let Some(pair) = pair {
+                    dumped.push(
+                        json!({"k": dumped.len(), "motion": pair.motion, "inliers": pair.inliers,
+                        "reference": pair.reference, "query": pair.query,
+                        "ours": {"err": t.err, "time_us": t.time_us}}),
+                    );
+                }
                 t
             })
             .collect();
         pb.finish_and_clear();
+        if let Some(dir) = &a.dump {
+            let text: String = dumped.iter().map(|v| format!("{v}\n")).collect();
+            write_dump(dir, "e1-pairs.jsonl", &text)?;
+        }
         let errs: Vec<[f64; 3]> = trials.iter().filter_map(|t| t.err).collect();
         let good: Vec<[f64; 3]> = errs
             .iter()
@@ -453,4 +481,52 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
     }
     report["summaries"] = serde_json::to_value(&summaries).unwrap_or(Value::Null);
     Ok(report)
+}
+
+/// Writes `text` to `dir/name` (creating `dir`).
+fn write_dump(dir: &std::path::Path, name: &str, text: &str) -> Result<(), crate::util::CliError> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", dir.display())))?;
+    let path = dir.join(name);
+    std::fs::write(&path, text).map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", path.display())))
+}
+
+/// `--dump`: the scans `run_e4` localizes for this run (the same random
+/// streams), as JSON Lines with ids `scan K`, and their true robot poses.
+fn dump_e4<D: AsRef<[u8]>>(
+    db: &refloc::RefDb<D>,
+    poses: &[refloc::Pose2],
+    spec: &ScanSpec,
+    seed: u64,
+    dir: &std::path::Path,
+    name: &str,
+) -> Result<(), crate::util::CliError> {
+    use mapc::scanio::{scan_to_json, ScanData};
+    let (grid, frame) = (db.grid(), db.frame());
+    let lidar = spec.lidar();
+    let (mut scans, mut truth) = (String::new(), String::new());
+    for (k, p) in poses.iter().enumerate() {
+        let mut rng = eval::e4_rng(seed, k);
+        let sensor = p.compose(&db.params().sensor.offset);
+        let s = eval::simulate(&grid, &frame, &sensor, spec, &mut rng);
+        let data = match s.points {
+            Some(points) => ScanData::Points {
+                points,
+                range_max: spec.range_max,
+            },
+            None => ScanData::Ranges {
+                angle_min: lidar.angle_min,
+                angle_increment: lidar.angle_increment,
+                range_min: lidar.range_min,
+                range_max: lidar.range_max,
+                ranges: s.ranges,
+            },
+        };
+        let t = [sensor.x as f64, sensor.y as f64, sensor.theta as f64];
+        scans.push_str(&scan_to_json(&data, &format!("scan {k}"), Some(t)));
+        scans.push('\n');
+        truth.push_str(&format!("{k} 0 0 {} {} {}\n", p.x, p.y, p.theta));
+    }
+    write_dump(dir, &format!("{name}-scans.jsonl"), &scans)?;
+    write_dump(dir, &format!("{name}-truth.txt"), &truth)
 }

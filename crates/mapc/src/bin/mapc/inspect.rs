@@ -45,7 +45,7 @@ pub struct DiffArgs {
 /// All parameters as a JSON object (units in the names).
 pub fn params_json(p: &refloc::Params) -> Value {
     let s = &p.sensor;
-    json!({
+    let mut v = json!({
         "beams": s.beams, "angle_min_rad": s.angle_min, "angle_increment_rad": s.angle_increment,
         "range_min_m": s.range_min, "range_max_m": s.range_max,
         "sensor_offset": [s.offset.x, s.offset.y, s.offset.theta],
@@ -60,7 +60,13 @@ pub fn params_json(p: &refloc::Params) -> Value {
         "selection": format!("{:?}", p.selection), "early_accept": p.early_accept, "early_min": p.early_min, "ambiguity_ratio": p.ambiguity_ratio, "affinity_cap": p.affinity_cap,
         "window_widths_rad": p.win_widths, "window_headings": p.win_headings, "window_rho_bins": p.win_rho_bins, "window_theta_bins": p.win_theta_bins,
         "scratch_bytes_362": refloc::scratch_size(p, 362), "scratch_bytes_1081": refloc::scratch_size(p, 1081),
-    })
+    });
+    // Added in a second step: one json! call this long exceeds the macro recursion limit.
+    v["through_max"] = json!(p.through_max);
+    v["through_excess_m"] = json!(p.through_excess);
+    v["short_weight"] = json!(p.short_weight);
+    v["through_run"] = json!(p.through_run);
+    v
 }
 
 fn info_json<D: AsRef<[u8]>>(db: &RefDb<D>) -> Value {

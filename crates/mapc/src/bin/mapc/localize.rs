@@ -168,15 +168,9 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                     *range_max
                 }
             };
-            let v = refloc::verify::vicinity(
-                &db.grid(),
-                &db.frame(),
-                &sensor,
-                angles.into_iter().zip(ranges),
-                rmax,
-                db.params().sigma_d,
-                db.params().accept_ratio,
-            );
+            let grid = db.grid();
+            let v = refloc::verify::Verifier::new(&db, &grid, rmax)
+                .score(&sensor, angles.into_iter().zip(ranges));
             (v.score / (4.5 * v.pairs.max(1) as f32)) as f64
         });
         match r {
@@ -226,7 +220,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                         "site": l.site, "coarse_rank": l.coarse_rank, "gamma": l.gamma,
                         "match_score": l.match_score, "inliers": l.inliers,
                         "vicinity": l.vicinity, "vicinity_threshold": l.vicinity_threshold,
-                        "valid_points": l.valid_points, "short_beams": l.short_beams, "long_beams": l.long_beams,
+                        "valid_points": l.valid_points, "short_beams": l.short_beams, "long_beams": l.long_beams, "through_beams": l.through_beams,
                         "ambiguous": l.ambiguous, "time_us": time_us,
                     });
                     if a.no_candidates {

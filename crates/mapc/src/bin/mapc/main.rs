@@ -14,6 +14,7 @@ mod eval;
 mod inspect;
 mod localize;
 mod render;
+mod stages;
 mod synth;
 mod util;
 
@@ -52,6 +53,9 @@ enum Cmd {
     Render(render::Args),
     /// Generate a synthetic map (office, warehouse, cave) as PGM + YAML.
     Synth(synth::Args),
+    /// Time the distance transform and GVD stages alone and write them as .npy (for bench/peers).
+    #[command(hide = true)]
+    Stages(stages::Args),
 }
 
 fn main() -> ExitCode {
@@ -76,6 +80,7 @@ fn main() -> ExitCode {
         Cmd::Demo(a) => demo::run(a, &ui),
         Cmd::Render(a) => render::run(a, &ui),
         Cmd::Synth(a) => synth::run(a, &ui),
+        Cmd::Stages(a) => stages::run(a, &ui),
     };
     match r {
         Ok(code) => code,
