@@ -24,7 +24,7 @@
 #     so that parts 2 .. N + 1 each hold one whole query (part 1 is the
 #     loading and the scan simulation): median and mean instructions per
 #     query over those N (deterministic, unlike the wall time), and the
-#     share of them in the coarse ranking (refloc::coarse::rank_top_scores,
+#     share of them in the coarse ranking (refloc::coarse::rank_sites,
 #     which correlates the query's histogram with every site's).
 #
 # Builds run one at a time (the machine is shared; the 16k x 16k build
@@ -117,7 +117,7 @@ measure() {
     QC=$TARGET/release/query-count
 
     mkdir -p "$OUT/maps" "$OUT/refdb" "$OUT/logs"
-    STEPS="load edt gvd.specks gvd.candidates gvd.thin gvd.prune gvd.graph sites.place sites.coverage compile.dist compile.scans compile.fit compile.hists compile.windows compile.sections write verify"
+    STEPS="load edt gvd.specks gvd.candidates gvd.thin gvd.prune gvd.graph sites.place sites.coverage compile.dist compile.scans compile.fit compile.hists compile.windows compile.sections index write verify"
     {
         printf 'size,width,height,cells,resolution_m,seed,sites,refdb_bytes,build_wall_s,build_cpu_s,'
         printf 'peak_rss_bytes,rss_bytes_per_cell,wall_us_per_cell,cpu_us_per_cell,'
@@ -196,7 +196,7 @@ print(s["median_time_us"] / 1000, s["mean_time_us"] / 1000, s["success_rate"], s
             coarse=$(for f in $parts; do
                 t=$(sed -n 's/^totals: *//p' "$f")
                 c=$(callgrind_annotate --auto=no --inclusive=yes "$f" 2>/dev/null |
-                    awk '/refloc::coarse::rank_top_scores \[/ { gsub(",", "", $1); print $1; exit }')
+                    awk '/refloc::coarse::rank_sites \[/ { gsub(",", "", $1); print $1; exit }')
                 echo "$t ${c:-0}"
             done | awk '{ t += $1; c += $2 } END { printf "%.3f", (t > 0 ? c / t : 0) }')
         fi

@@ -11,6 +11,7 @@ pub mod eval;
 pub mod figures;
 pub mod fit;
 pub mod gvd;
+pub mod index;
 pub mod mapfile;
 pub mod pipeline;
 pub mod plot;

@@ -68,6 +68,11 @@ pub struct BuildConfig {
     pub short_weight: f32,
     /// Free-space check: least run of consecutive through-wall beams that counts.
     pub through_run: u32,
+    /// Short beams cost nothing when the other beams fit at least this well (0: always).
+    pub occlusion_fit: f32,
+    /// The coarse-search index (built for maps with at least
+    /// `index.min_sites` sites; its seed is replaced by `seed`).
+    pub index: crate::index::IndexOptions,
 }
 
 impl Default for BuildConfig {
@@ -96,6 +101,8 @@ impl Default for BuildConfig {
             through_max: Params::defaults(362, 30.0).through_max,
             short_weight: Params::defaults(362, 30.0).short_weight,
             through_run: Params::defaults(362, 30.0).through_run,
+            occlusion_fit: Params::defaults(362, 30.0).occlusion_fit,
+            index: crate::index::IndexOptions::default(),
         }
     }
 }
@@ -122,6 +129,7 @@ impl BuildConfig {
         p.through_max = self.through_max;
         p.short_weight = self.short_weight;
         p.through_run = self.through_run;
+        p.occlusion_fit = self.occlusion_fit;
         if self.fov_windows_deg.len() > 2 {
             return Err("at most two --fov-windows widths".into());
         }
@@ -326,6 +334,28 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> 
         scans,
         fit,
     } = compile::compile_with(&input, &site_in, &mut |name| laps.lap(name))?;
+    let index_opts = crate::index::IndexOptions {
+        seed: cfg.seed,
+        ..cfg.index.clone()
+    };
+    let section = |k: SectionKind| {
+        sections
+            .iter()
+            .find(|(kind, _)| *kind == k)
+            .map(|(_, b)| b.as_slice())
+            .unwrap_or(&[])
+    };
+    let index = crate::index::build(
+        section(SectionKind::Hists),
+        section(SectionKind::Windows),
+        &params,
+        site_in.len(),
+        &index_opts,
+    )?;
+    if let Some(bytes) = index {
+        sections.push((SectionKind::Index, bytes));
+    }
+    laps.lap("index");
     times.compile = t.elapsed().as_secs_f64();
     let manifest = serde_json::json!({
         "generator": "mapc",

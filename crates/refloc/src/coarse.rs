@@ -95,6 +95,76 @@ pub fn rank_top_scores(scores: impl Iterator<Item = f32>, top: &mut [Ranked]) ->
     n
 }
 
+/// Inserts `site` with score `g` into `top[..*n]` (best first, at most
+/// `top.len()`), keeping one entry per site: a site already listed keeps the
+/// better of its two scores.
+fn insert_unique(top: &mut [Ranked], n: &mut usize, site: u32, g: f32) {
+    let cap = top.len();
+    let better = |a: f32, ai: u32, b: &Ranked| a > b.gamma || (a == b.gamma && ai < b.site);
+    if cap == 0 || (*n == cap && !better(g, site, &top[cap - 1])) {
+        return;
+    }
+    let mut pos = match top[..*n].iter().position(|r| r.site == site) {
+        Some(p) if !better(g, site, &top[p]) => return,
+        Some(p) => p,
+        None if *n < cap => {
+            *n += 1;
+            *n - 1
+        }
+        None => cap - 1,
+    };
+    while pos > 0 && better(g, site, &top[pos - 1]) {
+        top[pos] = top[pos - 1];
+        pos -= 1;
+    }
+    top[pos] = Ranked { site, gamma: g };
+}
+
+/// Ranks the sites for a query histogram computed by [`query_histogram`]
+/// with `window`, keeping the `top.len()` best in `top` (best first).
+/// Returns how many entries are filled.
+///
+/// With a coarse-search index for this view ([`crate::index`]), only the
+/// sites in the leaves the index search keeps are scored (sublinear in the
+/// sites; a window view scores only the (site, heading) entries found, and
+/// a site's score is the best of them); without one, every site is scored
+/// by [`site_score`].
+///
+/// Not inlined, so profiles show the coarse ranking on its own.
+#[inline(never)]
+pub fn rank_sites<D: AsRef<[u8]>>(
+    db: &crate::RefDb<D>,
+    hist: &[f32],
+    window: Option<usize>,
+    top: &mut [Ranked],
+) -> usize {
+    use crate::index::ViewKind;
+    let kind = match window {
+        None => ViewKind::Full,
+        Some(w) => ViewKind::Window(w),
+    };
+    if let Some(index) = db.index().filter(|i| i.has(kind)) {
+        let headings = (db.params().win_headings as usize).max(1);
+        let mut n = 0usize;
+        index.search(kind, hist, |e| {
+            let e = e as usize;
+            let (site, g) = match kind {
+                ViewKind::Full => (e, correlation(hist, db.hist(e))),
+                ViewKind::Window(w) => {
+                    let (site, h) = (e / headings, e % headings);
+                    (site, correlation(hist, db.window_hist(site, w, h)))
+                }
+            };
+            insert_unique(top, &mut n, site as u32, g);
+        });
+        return n;
+    }
+    rank_top_scores(
+        (0..db.site_count()).map(|s| site_score(db, hist, window, s)),
+        top,
+    )
+}
+
 /// Applies the N_C rule to a ranked list (best first); returns N_C.
 pub fn candidate_count(ranked: &[Ranked], nc_min: usize, nc_max: usize, margin: f32) -> usize {
     let Some(best) = ranked.first() else {

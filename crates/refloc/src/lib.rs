@@ -9,6 +9,8 @@
 //! - [`prep`]: scan points, surfaces, resampling, tangents.
 //! - [`pgr`]: pairwise geometric relationships and the 2D histogram.
 //! - [`coarse`]: correlation against every site, candidate count N_C.
+//! - [`index`]: the optional tree over the sites' histograms that makes the
+//!   coarse ranking sublinear on large maps.
 //! - [`ssm`]: spectral scan matching against a candidate's reference scan.
 //! - [`refine`]: pose refinement against the map's distance field.
 //! - [`verify`]: the vicinity score.
@@ -46,6 +48,7 @@ pub mod coarse;
 pub mod db;
 pub mod format;
 pub mod frame;
+pub mod index;
 pub mod localize;
 pub mod math;
 pub mod params;

@@ -400,10 +400,7 @@ pub fn localize<'s, D: AsRef<[u8]>>(
     //    and ranking. The reference buffers are free until the fine stage.
     let (window, cells) = coarse::query_histogram(in_pts, fov, wrap, params, r_pts, r_tan, hist);
     let hist = &hist[..cells];
-    let ranked = coarse::rank_top_scores(
-        (0..db.site_count()).map(|s| coarse::site_score(db, hist, window, s)),
-        top,
-    );
+    let ranked = coarse::rank_sites(db, hist, window, top);
     let nc = coarse::candidate_count(
         &top[..ranked],
         params.nc_min as usize,
@@ -478,7 +475,7 @@ pub fn localize<'s, D: AsRef<[u8]>>(
             cand.pairs = v.pairs;
             cand.through_beams = v.through;
             cand.free_space_ok = free_ok as u32;
-            cand.evidence = v.evidence(params.short_weight);
+            cand.evidence = v.evidence(params.short_weight, params.occlusion_fit);
             // A pose that passes the free-space check beats one that fails it.
             let better = match best {
                 None => true,

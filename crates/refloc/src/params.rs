@@ -124,6 +124,10 @@ pub struct Params {
     /// Free-space check: beams through a wall count only in runs of at
     /// least this many consecutive beams (0 or 1: every one counts).
     pub through_run: u32,
+    /// Verification: short beams cost nothing when the other beams fit the
+    /// map at least this well (see [`crate::verify::Vicinity::evidence`]; 0:
+    /// they always cost `short_weight`).
+    pub occlusion_fit: f32,
 }
 
 impl Params {
@@ -177,6 +181,7 @@ impl Params {
             through_excess: 0.5,
             short_weight: 1.0,
             through_run: 3,
+            occlusion_fit: 0.9,
         }
     }
 
@@ -323,6 +328,9 @@ impl Params {
         if self.through_run > 64 {
             return Err("through_run");
         }
+        if !(self.occlusion_fit >= 0.0 && self.occlusion_fit <= 1.0) {
+            return Err("occlusion_fit");
+        }
         if !(self.early_accept >= 0.0 && self.early_accept <= 1.0) {
             return Err("early_accept");
         }
@@ -388,6 +396,7 @@ impl Params {
             through_excess: r.through_excess.get(),
             short_weight: r.short_weight.get(),
             through_run: r.through_run.get(),
+            occlusion_fit: r.occlusion_fit.get(),
         })
     }
 
@@ -447,7 +456,7 @@ impl Params {
             through_excess: F32::new(self.through_excess),
             short_weight: F32::new(self.short_weight),
             through_run: U32::new(self.through_run),
-            reserved: [U32::new(0); 1],
+            occlusion_fit: F32::new(self.occlusion_fit),
         }
     }
 }

@@ -283,10 +283,79 @@ pub(crate) mod fixture {
                     SectionKind::Hists => hists.as_bytes().to_vec(),
                     SectionKind::Manifest => br#"{"generator":"refloc unit tests"}"#.to_vec(),
                     SectionKind::Windows => windows.as_bytes().to_vec(),
+                    SectionKind::Index => tiny_index(&p, &hists, &windows, sites.len()),
                 };
                 (k, bytes)
             })
             .collect()
+    }
+
+    /// A coarse-search index for the fixture: per view (full, then each
+    /// window width), a root with two leaves splitting the entries in
+    /// halves; centroids are the members' mean histograms.
+    pub(crate) fn tiny_index(p: &Params, hists: &[f32], windows: &[f32], sites: usize) -> Vec<u8> {
+        use crate::format::{IndexHeader, IndexNode, IndexView};
+        let node = |first: u32, count: u32, leaf: u32| IndexNode {
+            first: U32::new(first),
+            count: U32::new(count),
+            leaf: U32::new(leaf),
+            reserved: U32::new(0),
+        };
+        let (nw, nh, wc) = (p.win_count(), p.win_headings as usize, p.win_cells());
+        // (kind, entry histograms) per view.
+        let mut views: Vec<(u32, Vec<&[f32]>)> = vec![(0, hists.chunks(p.hist_cells()).collect())];
+        for w in 0..nw {
+            let mut v = Vec::new();
+            for s in 0..sites {
+                for h in 0..nh {
+                    let i = (s * nw + w) * nh + h;
+                    v.push(&windows[i * wc..(i + 1) * wc]);
+                }
+            }
+            views.push((1 + w as u32, v));
+        }
+        let (mut recs, mut nodes, mut entries, mut cents) =
+            (Vec::new(), Vec::new(), Vec::<u32>::new(), Vec::<f32>::new());
+        for (kind, hs) in &views {
+            let n = hs.len();
+            let half = n / 2;
+            let mean = |r: core::ops::Range<usize>| {
+                let mut m = vec![0f32; hs[0].len()];
+                for h in &hs[r.clone()] {
+                    m.iter_mut()
+                        .zip(h.iter())
+                        .for_each(|(a, b)| *a += b / r.len() as f32);
+                }
+                m
+            };
+            recs.push(IndexView {
+                kind: U32::new(*kind),
+                node_count: U32::new(3),
+                entry_count: U32::new(n as u32),
+                reserved: U32::new(0),
+            });
+            nodes.extend([
+                node(1, 2, 0),
+                node(0, half as u32, 1),
+                node(half as u32, (n - half) as u32, 1),
+            ]);
+            entries.extend(0..n as u32);
+            cents.extend(mean(0..n));
+            cents.extend(mean(0..half));
+            cents.extend(mean(half..n));
+        }
+        let header = IndexHeader {
+            view_count: U32::new(recs.len() as u32),
+            beam: U32::new(4),
+            leaves: U32::new(4),
+            reserved: U32::new(0),
+        };
+        let mut out = header.as_bytes().to_vec();
+        out.extend_from_slice(recs.as_bytes());
+        out.extend_from_slice(nodes.as_bytes());
+        out.extend_from_slice(entries.as_bytes());
+        out.extend_from_slice(cents.as_bytes());
+        out
     }
 
     /// Window histograms of a reference scan (heading 0 at the site): for
@@ -1164,9 +1233,14 @@ fn evidence_takes_a_share_of_a_hit_per_short_beam() {
         long: 0,
         through: 0,
     };
-    assert_eq!(v.evidence(0.0), 90.0);
-    assert_eq!(v.evidence(0.5), 90.0 - 4.0 * 4.5 * 0.5);
-    assert_eq!(v.evidence(1.0), 90.0 - 4.0 * 4.5);
+    assert_eq!(v.evidence(0.0, 0.0), 90.0);
+    assert_eq!(v.evidence(0.5, 0.0), 90.0 - 4.0 * 4.5 * 0.5);
+    assert_eq!(v.evidence(1.0, 0.0), 90.0 - 4.0 * 4.5);
+    // The 16 beams that are not short fit at 90 / (4.5 x 16) = 1.25 >= 0.9:
+    // the short beams are occlusions and cost nothing.
+    assert_eq!(v.evidence(1.0, 0.9), 90.0);
+    let loose = crate::verify::Vicinity { score: 45.0, ..v };
+    assert_eq!(loose.evidence(1.0, 0.9), 45.0 - 4.0 * 4.5);
 }
 
 #[test]

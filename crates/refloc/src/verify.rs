@@ -173,13 +173,20 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
 }
 
 impl Vicinity {
-    /// `M - 4.5 short_weight short`: the vicinity score less a share of the
-    /// weight a hit has, for every beam that ends in front of where the map
-    /// has a surface. Such a beam is weak evidence against the pose (the
-    /// paper's M ignores it: people and clutter make them), not none: a pose
-    /// on the wrong map leaves many. 0 gives the paper's M.
-    pub fn evidence(&self, short_weight: f32) -> f32 {
-        self.score - 4.5 * short_weight * self.short as f32
+    /// The evidence for the pose: M itself when the beams that are not
+    /// short fit the map at least `occlusion_fit` well
+    /// ([`Vicinity::explained_ratio`]; the short beams are then taken for
+    /// unmapped things in front, people and clutter), else
+    /// `M - 4.5 short_weight short`: each beam that ends in front of where
+    /// the map has a surface costs a share of a hit's weight, as it does on
+    /// a wrong map, where the rest of the scan fits only loosely.
+    /// `short_weight` 0 gives the paper's M.
+    pub fn evidence(&self, short_weight: f32, occlusion_fit: f32) -> f32 {
+        if occlusion_fit > 0.0 && self.explained_ratio() >= occlusion_fit {
+            self.score
+        } else {
+            self.score - 4.5 * short_weight * self.short as f32
+        }
     }
 
     /// True when at most `through_max` of the beams with a return went

@@ -281,6 +281,16 @@ impl<D: AsRef<[u8]>> RefDb<D> {
             .unwrap_or(&[])
     }
 
+    /// The coarse-search index (see [`crate::index`]), when the database
+    /// has one.
+    pub fn index(&self) -> Option<crate::index::Index<'_>> {
+        crate::index::Index::new(
+            self.section(SectionKind::Index),
+            &self.params,
+            self.site_count,
+        )
+    }
+
     /// The build manifest (UTF-8 JSON written by mapc; may be empty).
     pub fn manifest(&self) -> &str {
         core::str::from_utf8(self.section(SectionKind::Manifest)).unwrap_or("")
@@ -421,7 +431,7 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
         crcs[ki] = e.crc.get();
     }
     for k in SectionKind::ALL {
-        if !present[kind_index(k)] {
+        if !present[kind_index(k)] && !k.optional() {
             return Err(DbError::new(Missing, k.name(), 0, 0));
         }
     }
@@ -525,6 +535,7 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
         SectionKind::Hists,
         SectionKind::Neighbors,
         SectionKind::Windows,
+        SectionKind::Index,
     ] {
         let s = sec(k);
         if <[u32]>::ref_from_bytes(s).is_err() {
@@ -536,6 +547,8 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
             ));
         }
     }
+    crate::index::validate(sec(SectionKind::Index), &params, n_sites as usize)
+        .map_err(|f| DbError::new(Value, f, 0, 0))?;
     Ok((sections, crcs, meta, params))
 }
 

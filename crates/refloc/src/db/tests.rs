@@ -378,6 +378,7 @@ fn every_flipped_section_byte_is_caught() {
                                     | SectionKind::Params
                                     | SectionKind::Sites
                                     | SectionKind::Neighbors
+                                    | SectionKind::Index
                             ),
                             "{} content is not checked by new(): {e:?}",
                             kind.name()
@@ -447,9 +448,15 @@ fn bad_header_fields() {
             Some("section count"),
         );
     }
-    // One entry fewer: the last section is missing.
-    let last = SectionKind::ALL[SectionKind::ALL.len() - 1].name();
-    patch_both(|b| b[20] -= 1, Missing, Some(last));
+    // Entries fewer: the last required section is missing (the optional
+    // ones after it are dropped too).
+    let required = SectionKind::ALL
+        .iter()
+        .rposition(|k| !k.optional())
+        .unwrap();
+    let drop = (SectionKind::ALL.len() - required) as u8;
+    let last = SectionKind::ALL[required].name();
+    patch_both(|b| b[20] -= drop, Missing, Some(last));
     // One entry more: the table now runs into the first section.
     let first = SectionKind::ALL[0].name();
     patch_both(|b| b[20] += 1, Overlap, Some(first));
@@ -597,10 +604,18 @@ fn section_kinds_in_the_table() {
         s.push(meta);
     });
     expect(&b, Table, Some("duplicate section kind"));
-    // Each section missing in turn.
+    // Each section missing in turn: an error for a required one; an
+    // optional one reads as empty.
     for k in SectionKind::ALL {
         let b = reencode(|s| s.retain(|(kk, _)| *kk != k));
-        expect(&b, Missing, Some(k.name()));
+        if k.optional() {
+            let buf = Aligned::new(&b);
+            let db = RefDb::new(buf.bytes()).expect("an optional section may be left out");
+            db.verify().unwrap();
+            assert!(db.section(k).is_empty());
+        } else {
+            expect(&b, Missing, Some(k.name()));
+        }
     }
     // A kind changed to a missing one, through the table.
     let e = patch_both(

@@ -119,11 +119,17 @@ pub enum SectionKind {
     /// width and each heading, `win_rho_bins * win_theta_bins` `f32`
     /// normalized to sum 1 (empty when the database stores none).
     Windows = 10,
+    /// Optional coarse-search index (see [`crate::index`]): an
+    /// [`IndexHeader`], its [`IndexView`]s, every view's [`IndexNode`]s, the
+    /// views' entries (`u32`), then the nodes' centroid histograms (`f32`).
+    /// Absent (or empty) in small databases: the coarse stage then scores
+    /// every site. Added within version 1: files without it read as before.
+    Index = 11,
 }
 
 impl SectionKind {
     /// All kinds, in file order.
-    pub const ALL: [SectionKind; 10] = [
+    pub const ALL: [SectionKind; 11] = [
         SectionKind::Meta,
         SectionKind::Params,
         SectionKind::Grid,
@@ -134,6 +140,7 @@ impl SectionKind {
         SectionKind::Hists,
         SectionKind::Manifest,
         SectionKind::Windows,
+        SectionKind::Index,
     ];
 
     /// From the raw value, if known.
@@ -154,9 +161,68 @@ impl SectionKind {
             SectionKind::Hists => "hists",
             SectionKind::Manifest => "manifest",
             SectionKind::Windows => "windows",
+            SectionKind::Index => "index",
         }
     }
+
+    /// True for a section a file may leave out (it then reads as empty).
+    pub fn optional(self) -> bool {
+        matches!(self, SectionKind::Index)
+    }
 }
+
+/// Start of the index section (16 bytes).
+#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[repr(C)]
+pub struct IndexHeader {
+    /// Number of [`IndexView`] records that follow (at most
+    /// `1 + win_count`).
+    pub view_count: U32,
+    /// Search: internal nodes kept per level (1..=[`INDEX_BEAM_MAX`]).
+    pub beam: U32,
+    /// Search: leaves whose entries are scored (1..=[`INDEX_LEAVES_MAX`]).
+    pub leaves: U32,
+    /// Zero.
+    pub reserved: U32,
+}
+
+/// One searchable view of the sites (16 bytes): a tree over the full
+/// histograms or over one window width's (site, heading) histograms.
+#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[repr(C)]
+pub struct IndexView {
+    /// 0: full histograms (entry = site); `1 + w`: window width slot `w`
+    /// (entry = `site * win_headings + heading`).
+    pub kind: U32,
+    /// Nodes of this view (node 0 is its root).
+    pub node_count: U32,
+    /// Entries of this view.
+    pub entry_count: U32,
+    /// Zero.
+    pub reserved: U32,
+}
+
+/// One tree node (16 bytes); indices are local to its view.
+#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[repr(C)]
+pub struct IndexNode {
+    /// Internal node: its first child (greater than the node's own index);
+    /// leaf: its first entry.
+    pub first: U32,
+    /// Children (1..=[`INDEX_CHILDREN_MAX`]) or entries.
+    pub count: U32,
+    /// 1 for a leaf, 0 for an internal node.
+    pub leaf: U32,
+    /// Zero.
+    pub reserved: U32,
+}
+
+/// Most internal nodes the index search keeps per level.
+pub const INDEX_BEAM_MAX: usize = 32;
+/// Most leaves whose entries the index search scores.
+pub const INDEX_LEAVES_MAX: usize = 64;
+/// Most children of an index node.
+pub const INDEX_CHILDREN_MAX: usize = 64;
 
 /// Distance-map quantization: this many steps per grid cell.
 pub const DIST_STEPS_PER_CELL: f32 = 8.0;
@@ -333,8 +399,10 @@ pub struct ParamsRecord {
     /// Free-space check: least run of consecutive beams through a wall that
     /// counts. Added within version 1 like `through_max`.
     pub through_run: U32,
-    /// Zero.
-    pub reserved: [U32; 1],
+    /// Verification: short beams cost nothing when the other beams fit at
+    /// least this well (0: always). Added within version 1 like
+    /// `through_max`; this used the last reserved field.
+    pub occlusion_fit: F32,
 }
 
 /// The number of padding bytes that bring `len` to a multiple of [`SECTION_ALIGN`].
@@ -406,3 +474,6 @@ const _: () = assert!(core::mem::size_of::<Header>() == HEADER_LEN);
 const _: () = assert!(core::mem::size_of::<SectionEntry>() == ENTRY_LEN);
 const _: () = assert!(core::mem::size_of::<MetaRecord>() == 64);
 const _: () = assert!(core::mem::size_of::<SiteRecord>() == 24);
+const _: () = assert!(core::mem::size_of::<IndexHeader>() == 16);
+const _: () = assert!(core::mem::size_of::<IndexView>() == 16);
+const _: () = assert!(core::mem::size_of::<IndexNode>() == 16);

@@ -102,6 +102,18 @@ pub struct BuildOpts {
     /// Free-space check: beams through a wall count only in runs of at least this many consecutive beams.
     #[arg(long, value_name = "BEAMS")]
     pub through_run: Option<u32>,
+    /// Short beams cost nothing when the other beams fit the map at least this well (explained share; 0: they always cost --short-weight).
+    #[arg(long, value_name = "SHARE")]
+    pub occlusion_fit: Option<f32>,
+    /// Build the coarse-search index (sublinear ranking of the sites) for maps with at least this many sites; smaller maps are ranked exhaustively.
+    #[arg(long, value_name = "SITES", default_value_t = mapc::index::IndexOptions::default().min_sites)]
+    pub index_min_sites: usize,
+    /// Coarse-search index: internal nodes kept per level of the search (1-32; more: better recall, slower).
+    #[arg(long, value_name = "NODES", default_value_t = mapc::index::IndexOptions::default().beam)]
+    pub index_beam: u32,
+    /// Coarse-search index: leaves whose sites are scored exactly (1-64; more: better recall, slower).
+    #[arg(long, value_name = "LEAVES", default_value_t = mapc::index::IndexOptions::default().leaves)]
+    pub index_leaves: u32,
 }
 
 impl BuildOpts {
@@ -133,6 +145,13 @@ impl BuildOpts {
             through_max: self.through_max.unwrap_or(d.through_max),
             short_weight: self.short_weight.unwrap_or(d.short_weight),
             through_run: self.through_run.unwrap_or(d.through_run),
+            occlusion_fit: self.occlusion_fit.unwrap_or(d.occlusion_fit),
+            index: mapc::index::IndexOptions {
+                min_sites: self.index_min_sites,
+                beam: self.index_beam,
+                leaves: self.index_leaves,
+                ..d.index.clone()
+            },
             fov_windows_deg: if self.fov_windows.trim() == "none" {
                 Vec::new()
             } else {

@@ -65,6 +65,10 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         through_max: None,
         short_weight: None,
         through_run: None,
+        occlusion_fit: None,
+        index_min_sites: mapc::index::IndexOptions::default().min_sites,
+        index_beam: mapc::index::IndexOptions::default().beam,
+        index_leaves: mapc::index::IndexOptions::default().leaves,
     };
     let built = pipeline::build(&src, &opts.config()).map_err(|e| input_err(anyhow::anyhow!(e)))?;
     let stem = a

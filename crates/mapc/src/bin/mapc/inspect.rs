@@ -66,6 +66,7 @@ pub fn params_json(p: &refloc::Params) -> Value {
     v["through_excess_m"] = json!(p.through_excess);
     v["short_weight"] = json!(p.short_weight);
     v["through_run"] = json!(p.through_run);
+    v["occlusion_fit"] = json!(p.occlusion_fit);
     v
 }
 
