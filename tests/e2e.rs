@@ -356,3 +356,98 @@ fn demo_runs_from_the_repository_root() {
     assert!(out.join("static-poses.png").exists());
     assert!(out.join("report.json").exists());
 }
+
+#[test]
+fn a_coarse_index_is_built_on_request_verified_and_as_good_as_exhaustive_ranking() {
+    let dir = tempfile::tempdir().unwrap();
+    let plain = dir.path().join("plain.refdb");
+    std::fs::rename(built(dir.path(), &[]), &plain).unwrap();
+    // The demo map has ~130 sites, below the default threshold: force a
+    // narrow index so it really prunes.
+    let indexed = dir.path().join("indexed.refdb");
+    let db = built(
+        dir.path(),
+        &[
+            "--index-min-sites",
+            "1",
+            "--index-leaf-size",
+            "4",
+            "--index-leaves",
+            "16",
+            "--index-beam",
+            "4",
+        ],
+    );
+    std::fs::rename(db, &indexed).unwrap();
+    let o = mapc(&["verify", indexed.to_str().unwrap()], dir.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let o = mapc(&["info", "--json", indexed.to_str().unwrap()], dir.path());
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("\"index\""), "{}", text(&o));
+    // The search scores only part of the sites.
+    let bytes = std::fs::read(&indexed).unwrap();
+    let mut al = vec![0u32; bytes.len().div_ceil(4)];
+    zerocopy::IntoBytes::as_mut_bytes(&mut al[..])[..bytes.len()].copy_from_slice(&bytes);
+    let db = refloc::RefDb::new(&zerocopy::IntoBytes::as_bytes(&al[..])[..bytes.len()]).unwrap();
+    let index = db.index().expect("an index was requested");
+    let mut visited = 0;
+    index
+        .search(refloc::index::ViewKind::Full, db.hist(0), |_| visited += 1)
+        .unwrap();
+    assert!(
+        visited > 0 && visited < db.site_count(),
+        "{visited} of {}",
+        db.site_count()
+    );
+    // Same localization quality as the exhaustive ranking, by eval --check.
+    let common = [
+        "--poses",
+        "60",
+        "--experiments",
+        "static",
+        "--no-figures",
+        "--seed",
+        "3",
+    ];
+    let base = dir.path().join("base");
+    let mut args = vec![
+        "eval",
+        plain.to_str().unwrap(),
+        "--out",
+        base.to_str().unwrap(),
+    ];
+    args.extend_from_slice(&common);
+    let o = mapc(&args, dir.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let report = base.join("report.json");
+    let out = dir.path().join("idx");
+    let mut args = vec![
+        "eval",
+        indexed.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--check",
+        report.to_str().unwrap(),
+    ];
+    args.extend_from_slice(&common);
+    let o = mapc(&args, dir.path());
+    assert!(
+        o.status.success(),
+        "indexed database regressed: {}",
+        text(&o)
+    );
+    // Bad index options are bad usage.
+    let o = mapc(
+        &[
+            "build",
+            demo_map().to_str().unwrap(),
+            "-o",
+            dir.path().join("x.refdb").to_str().unwrap(),
+            "--index-beam",
+            "0",
+        ],
+        dir.path(),
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("index beam"), "{}", text(&o));
+}

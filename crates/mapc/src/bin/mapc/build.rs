@@ -114,6 +114,9 @@ pub struct BuildOpts {
     /// Coarse-search index: leaves whose sites are scored exactly (1-64; more: better recall, slower).
     #[arg(long, value_name = "LEAVES", default_value_t = mapc::index::IndexOptions::default().leaves)]
     pub index_leaves: u32,
+    /// Coarse-search index: a tree node with at most this many sites (or site headings) is a leaf.
+    #[arg(long, value_name = "ENTRIES", default_value_t = mapc::index::IndexOptions::default().leaf_size)]
+    pub index_leaf_size: usize,
 }
 
 impl BuildOpts {
@@ -150,6 +153,7 @@ impl BuildOpts {
                 min_sites: self.index_min_sites,
                 beam: self.index_beam,
                 leaves: self.index_leaves,
+                leaf_size: self.index_leaf_size,
                 ..d.index.clone()
             },
             fov_windows_deg: if self.fov_windows.trim() == "none" {
@@ -188,6 +192,9 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     let t0 = Instant::now();
     let cfg = a.opts.config();
     cfg.params().map_err(|e| input_err(anyhow::anyhow!(e)))?;
+    cfg.index
+        .validate()
+        .map_err(|e| input_err(anyhow::anyhow!(e)))?;
     let out = a.output.clone().unwrap_or_else(|| {
         let stem = a
             .map

@@ -69,6 +69,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         index_min_sites: mapc::index::IndexOptions::default().min_sites,
         index_beam: mapc::index::IndexOptions::default().beam,
         index_leaves: mapc::index::IndexOptions::default().leaves,
+        index_leaf_size: mapc::index::IndexOptions::default().leaf_size,
     };
     let built = pipeline::build(&src, &opts.config()).map_err(|e| input_err(anyhow::anyhow!(e)))?;
     let stem = a
