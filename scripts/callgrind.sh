@@ -19,7 +19,7 @@
 #    scan i mod 50, one thread). Instructions per query =
 #    (Ir(N) - Ir(0)) / N, so loading and simulation are excluded. N should be
 #    a multiple of 50 (default 50: every scan once). A third run with
-#    --dump-after gives each query's own count: their median, 90th
+#    --dump-before on localize gives each query's own count: their median, 90th
 #    percentile and maximum are printed too (a few queries that examine
 #    many candidates make the mean much larger than the median);
 # 3. with --profile, also runs the N queries of each set with collection
@@ -83,18 +83,20 @@ count() { # count NAME ARGS...
     sed -n 's/^summary: *//p' "$WORK/$name.out"
 }
 
-# Each query's own count: with --dump-after, callgrind writes a profile part
-# after every return from localize; with N+1 queries, parts 2..N+1 hold
-# queries 1..N alone (part 1 also holds the set-up and query 0; query N is
-# scan N mod 50 again, so with N = 50 every scan appears once).
+# Each query's own count: with --dump-before, callgrind writes a profile
+# part at every entry into localize; with N+1 queries, part 1 is the set-up
+# and parts 2..N+1 hold queries 0..N-1 alone (each with the few instructions
+# of the loop until the next entry). A dump on *leaving* localize is not
+# used: callgrind does not see every return, and splits some queries.
 each() { # each NAME ARGS... -> "median p90 max" of the per-query counts
     local name=$1
     shift
     rm -f "$WORK/$name.out"*
     valgrind --tool=callgrind --callgrind-out-file="$WORK/$name.out" \
-        --dump-after='*localize::localize*' "$@" >"$WORK/$name.log" 2>&1 ||
+        --dump-before='refloc::localize::localize' "$@" >"$WORK/$name.log" 2>&1 ||
         { cat "$WORK/$name.log" >&2; die "valgrind run $name failed"; }
     for k in $(seq 2 $((N + 1))); do
+        [ -s "$WORK/$name.out.$k" ] || die "valgrind run $name: no part $k"
         sed -n 's/^totals: *//p' "$WORK/$name.out.$k"
     done | sort -n | awk '{ a[NR] = $1 }
         END { i = int(0.9 * (NR - 1) + 0.5) + 1

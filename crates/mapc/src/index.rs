@@ -18,7 +18,8 @@
 
 use rayon::prelude::*;
 use refloc::format::{
-    IndexHeader, IndexNode, IndexView, INDEX_BEAM_MAX, INDEX_CHILDREN_MAX, INDEX_LEAVES_MAX,
+    IndexHeader, IndexNode, IndexView, INDEX_BEAM_MAX, INDEX_CHILDREN_MAX, INDEX_DEPTH_MAX,
+    INDEX_LEAVES_MAX,
 };
 use refloc::params::Params;
 use serde::Serialize;
@@ -249,6 +250,7 @@ fn build_tree(
     members: Vec<u32>,
     opts: &IndexOptions,
     seed: u64,
+    depth: usize,
 ) -> Tree {
     let cells = vecs.cells;
     let mut centroid = vec![0f32; cells];
@@ -259,7 +261,9 @@ fn build_tree(
     }
     let inv = 1.0 / members.len().max(1) as f32;
     centroid.iter_mut().for_each(|a| *a *= inv);
-    if members.len() <= opts.leaf_size {
+    // A leaf at the runtime's deepest level whatever its size (only
+    // pathological splits, one member at a time, get there).
+    if members.len() <= opts.leaf_size || depth >= INDEX_DEPTH_MAX {
         return Tree {
             centroid,
             node: Node::Leaf(members),
@@ -276,7 +280,7 @@ fn build_tree(
         .enumerate()
         .map(|(i, g)| {
             let child_seed = Rng::stream(seed, i as u64 + 1).next_u64();
-            build_tree(vecs, units, g, opts, child_seed)
+            build_tree(vecs, units, g, opts, child_seed, depth + 1)
         })
         .collect();
     Tree {
@@ -374,7 +378,7 @@ pub fn build(
         let n = vecs.count;
         let u = units(vecs);
         let seed = Rng::stream(opts.seed, *kind as u64).next_u64();
-        let tree = build_tree(vecs, &u, (0..n as u32).collect(), opts, seed);
+        let tree = build_tree(vecs, &u, (0..n as u32).collect(), opts, seed, 0);
         drop(u);
         let (nd, en, ce) = flatten(&tree);
         view_recs.push(IndexView {

@@ -20,12 +20,15 @@
 //! Everything here reads the validated section in place; [`validate`] runs
 //! once in [`crate::RefDb::new`], after which [`Index::search`] cannot read
 //! out of bounds or loop forever (every child index is greater than its
-//! parent's, so each level moves strictly down the node array).
+//! parent's, so each level moves strictly down the node array), and its work
+//! is bounded by `INDEX_DEPTH_MAX` levels of `beam` x `INDEX_CHILDREN_MAX`
+//! centroids whatever the file holds.
 
 use zerocopy::FromBytes;
 
 use crate::format::{
-    IndexHeader, IndexNode, IndexView, INDEX_BEAM_MAX, INDEX_CHILDREN_MAX, INDEX_LEAVES_MAX,
+    IndexHeader, IndexNode, IndexView, INDEX_BEAM_MAX, INDEX_CHILDREN_MAX, INDEX_DEPTH_MAX,
+    INDEX_LEAVES_MAX,
 };
 use crate::params::Params;
 
@@ -291,7 +294,10 @@ impl<'a> Index<'a> {
             };
             nf = 1;
         }
-        while nf > 0 {
+        // At most INDEX_DEPTH_MAX levels of at most `beam` x 64 centroids.
+        let mut depth = 0;
+        while nf > 0 && depth < INDEX_DEPTH_MAX {
+            depth += 1;
             let mut nn = 0usize;
             for f in &front[..nf] {
                 let Some(node) = view.nodes.get(f.node as usize) else {

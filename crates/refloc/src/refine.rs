@@ -18,18 +18,38 @@ pub struct DistMap<'a> {
     pub data: &'a [u8],
     /// Grid placement.
     pub frame: MapFrame,
+    /// `(sin, cos)` of the grid's yaw, computed once: [`DistMap::sample`]
+    /// runs for every point of every refinement step.
+    rot: (f32, f32),
 }
 
 impl<'a> DistMap<'a> {
     /// The distance map stored in `db`.
     pub fn of<D: AsRef<[u8]>>(db: &'a crate::RefDb<D>) -> DistMap<'a> {
         let (width, height) = db.grid_size();
+        let frame = db.frame();
         DistMap {
             width,
             height,
             data: db.dist(),
-            frame: db.frame(),
+            frame,
+            rot: (
+                libm::sinf(frame.origin.theta),
+                libm::cosf(frame.origin.theta),
+            ),
         }
+    }
+
+    /// [`MapFrame::to_cells`] with the cached rotation (the same arithmetic).
+    #[inline]
+    fn to_cells(&self, p: [f32; 2]) -> [f32; 2] {
+        let (s, c) = self.rot;
+        let f = &self.frame;
+        let (dx, dy) = (p[0] - f.origin.x, p[1] - f.origin.y);
+        [
+            (c * dx + s * dy) / f.resolution,
+            (-s * dx + c * dy) / f.resolution,
+        ]
     }
 
     #[inline]
@@ -44,7 +64,7 @@ impl<'a> DistMap<'a> {
     /// Distance (m) to the nearest surface at map point `p` and its gradient
     /// (dimensionless), by bilinear interpolation between cell centres.
     pub fn sample(&self, p: [f32; 2]) -> Option<(f32, [f32; 2])> {
-        let uv = self.frame.to_cells(p);
+        let uv = self.to_cells(p);
         let (u, v) = (uv[0] - 0.5, uv[1] - 0.5);
         if !(u.is_finite() && v.is_finite())
             || u < -1.0
@@ -54,9 +74,8 @@ impl<'a> DistMap<'a> {
         {
             return None;
         }
-        let (x0, y0) = (libm::floorf(u), libm::floorf(v));
-        let (fx, fy) = (u - x0, v - y0);
-        let (x0, y0) = (x0 as i64, y0 as i64);
+        let (x0, y0) = (floor_i64(u), floor_i64(v));
+        let (fx, fy) = (u - x0 as f32, v - y0 as f32);
         let d00 = self.at(x0, y0);
         let d10 = self.at(x0 + 1, y0);
         let d01 = self.at(x0, y0 + 1);
@@ -70,11 +89,20 @@ impl<'a> DistMap<'a> {
         // Gradient in cell axes (per cell), then to the map frame (per metre).
         let gu = ((d10 - d00) * (1.0 - fy) + (d11 - d01) * fy) * unit / self.frame.resolution;
         let gv = ((d01 - d00) * (1.0 - fx) + (d11 - d10) * fx) * unit / self.frame.resolution;
-        let (s, c) = (
-            libm::sinf(self.frame.origin.theta),
-            libm::cosf(self.frame.origin.theta),
-        );
+        let (s, c) = self.rot;
         Some((d, [c * gu - s * gv, s * gu + c * gv]))
+    }
+}
+
+/// `floor(x)` of a finite `x` (bounded by the map size here) as an integer,
+/// exactly, without a libm call: truncate, then step down for negatives.
+#[inline]
+fn floor_i64(x: f32) -> i64 {
+    let t = x as i64;
+    if (t as f32) > x {
+        t - 1
+    } else {
+        t
     }
 }
 
@@ -208,5 +236,35 @@ fn solve3(h: &[[f32; 3]; 3], g: &[f32; 3]) -> Option<[f32; 3]> {
         Some(out)
     } else {
         None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::floor_i64;
+
+    #[test]
+    fn floor_matches_libm() {
+        let mut xs: Vec<f32> = (-300_000..300_000).map(|i| i as f32 * 1e-5).collect();
+        // Both neighbours of every integer from -4 to 4 (and of large ones).
+        for k in [
+            -4.0f32,
+            -3.0,
+            -2.0,
+            -1.0,
+            1.0,
+            2.0,
+            3.0,
+            4.0,
+            8_388_607.0,
+            16_777_215.0,
+        ] {
+            let b = k.to_bits();
+            xs.extend([k, f32::from_bits(b - 1), f32::from_bits(b + 1)]);
+        }
+        xs.extend([-0.0, 0.0, 1e-38, -1e-38, 3.0e7, -3.0e7]);
+        for x in xs {
+            assert_eq!(floor_i64(x), libm::floorf(x) as i64, "{x}");
+        }
     }
 }

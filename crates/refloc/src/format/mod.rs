@@ -223,6 +223,10 @@ pub const INDEX_BEAM_MAX: usize = 32;
 pub const INDEX_LEAVES_MAX: usize = 64;
 /// Most children of an index node.
 pub const INDEX_CHILDREN_MAX: usize = 64;
+/// Deepest level the index search descends to (the root is level 0);
+/// `mapc` builds trees no deeper than this, and the search of a deeper
+/// (malformed) one stops there, so its work is bounded whatever the file.
+pub const INDEX_DEPTH_MAX: usize = 48;
 
 /// Distance-map quantization: this many steps per grid cell.
 pub const DIST_STEPS_PER_CELL: f32 = 8.0;
