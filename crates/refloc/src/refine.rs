@@ -42,7 +42,7 @@ impl<'a> DistMap<'a> {
 
     /// [`MapFrame::to_cells`] with the cached rotation (the same arithmetic).
     #[inline]
-    fn to_cells(&self, p: [f32; 2]) -> [f32; 2] {
+    fn cells_of(&self, p: [f32; 2]) -> [f32; 2] {
         let (s, c) = self.rot;
         let f = &self.frame;
         let (dx, dy) = (p[0] - f.origin.x, p[1] - f.origin.y);
@@ -64,7 +64,7 @@ impl<'a> DistMap<'a> {
     /// Distance (m) to the nearest surface at map point `p` and its gradient
     /// (dimensionless), by bilinear interpolation between cell centres.
     pub fn sample(&self, p: [f32; 2]) -> Option<(f32, [f32; 2])> {
-        let uv = self.to_cells(p);
+        let uv = self.cells_of(p);
         let (u, v) = (uv[0] - 0.5, uv[1] - 0.5);
         if !(u.is_finite() && v.is_finite())
             || u < -1.0
