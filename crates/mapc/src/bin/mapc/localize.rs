@@ -74,6 +74,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     let (mut n, mut failed, mut accepted, mut correct, mut false_acc) =
         (0usize, 0usize, 0usize, 0usize, 0usize);
     let mut false_acc_truth_fits_worse = 0usize;
+    let mut false_acc_truth_refines_to_ours = 0usize;
     let mut errs: Vec<f64> = Vec::new();
     let mut times: Vec<f64> = Vec::new();
     if text {
@@ -136,43 +137,46 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             .and_then(|s| s.parse().ok())
             .unwrap_or(k);
         let gt = truth.get(&scan_index).copied();
+        // The scan's beams as (angle in the sensor frame (rad), range (m)),
+        // non-returns infinite: for judging the given truth pose.
+        let beams: Vec<(f32, f32)> = match &scan.data {
+            ScanData::Ranges {
+                angle_min,
+                angle_increment,
+                range_min,
+                range_max,
+                ranges,
+            } => (0..ranges.len())
+                .map(|i| {
+                    let r = ranges[i];
+                    let ok = r.is_finite() && r >= *range_min && r <= *range_max;
+                    (
+                        angle_min + i as f32 * angle_increment,
+                        if ok { r } else { f32::INFINITY },
+                    )
+                })
+                .collect(),
+            ScanData::Points { points, .. } => points
+                .iter()
+                .map(|p| (p[1].atan2(p[0]), p[0].hypot(p[1])))
+                .collect(),
+        };
+        let rmax = match &scan.data {
+            ScanData::Ranges { range_max, .. } | ScanData::Points { range_max, .. } => *range_max,
+        };
+        let truth_sensor = gt.map(|g| {
+            refloc::Pose2::new(g[0] as f32, g[1] as f32, g[2] as f32)
+                .compose(&db.params().sensor.offset)
+        });
         // How well the given truth pose itself explains the scan (M / max):
         // a low value means the truth and the map disagree there.
-        let truth_fit = gt.map(|g| {
-            let sensor = refloc::Pose2::new(g[0] as f32, g[1] as f32, g[2] as f32)
-                .compose(&db.params().sensor.offset);
-            let (angles, ranges): (Vec<f32>, Vec<f32>) = match &scan.data {
-                ScanData::Ranges {
-                    angle_min,
-                    angle_increment,
-                    range_min,
-                    range_max,
-                    ranges,
-                } => (0..ranges.len())
-                    .map(|i| {
-                        let r = ranges[i];
-                        let ok = r.is_finite() && r >= *range_min && r <= *range_max;
-                        (
-                            angle_min + i as f32 * angle_increment,
-                            if ok { r } else { f32::INFINITY },
-                        )
-                    })
-                    .unzip(),
-                ScanData::Points { points, .. } => points
-                    .iter()
-                    .map(|p| (p[1].atan2(p[0]), p[0].hypot(p[1])))
-                    .unzip(),
-            };
-            let rmax = match &scan.data {
-                ScanData::Ranges { range_max, .. } | ScanData::Points { range_max, .. } => {
-                    *range_max
-                }
-            };
+        let truth_fit = truth_sensor.map(|sensor| {
             let grid = db.grid();
             let v = refloc::verify::Verifier::new(&db, &grid, rmax)
-                .score(&sensor, angles.into_iter().zip(ranges));
+                .score(&sensor, beams.iter().copied());
             (v.score / (4.5 * v.pairs.max(1) as f32)) as f64
         });
+        let mut refined_truth: Option<refloc::Pose2> = None;
         match r {
             Ok(l) => {
                 if l.accepted {
@@ -194,6 +198,18 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                         let ours = (l.vicinity / (4.5 * l.valid_points.max(1) as f32)) as f64;
                         if truth_fit.is_some_and(|t| t < ours - 0.2) {
                             false_acc_truth_fits_worse += 1;
+                        }
+                        // Where does the given truth go when it is itself
+                        // refined against the map? Onto the estimate means
+                        // the map puts the scan where we did.
+                        if let Some(sensor) = truth_sensor {
+                            let r = truth_refined(&db, &beams, sensor);
+                            refined_truth = Some(r);
+                            let d = ((r.x - l.pose.x).powi(2) + (r.y - l.pose.y).powi(2)).sqrt();
+                            let dt = refloc::wrap_angle(r.theta - l.pose.theta).abs();
+                            if d < 0.3 && dt < 5f32.to_radians() {
+                                false_acc_truth_refines_to_ours += 1;
+                            }
                         }
                     }
                 }
@@ -238,6 +254,9 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                         o["error_m"] = json!(e);
                         o["error_rad"] = json!(et);
                         o["truth_vicinity_ratio"] = json!(truth_fit);
+                        if let Some(r) = refined_truth {
+                            o["truth_refined"] = json!([r.x, r.y, r.theta]);
+                        }
                     }
                     let _ = writeln!(out, "{o}");
                 }
@@ -278,6 +297,9 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             eprintln!(
                 "  of the false accepts, {false_acc_truth_fits_worse} are where the given truth pose explains the scan much worse than the estimate (vicinity ratio lower by > 0.2): truth and map disagree there"
             );
+            eprintln!(
+                "  of the false accepts, {false_acc_truth_refines_to_ours} have a given truth that, refined against the map (robust Gauss-Newton from the truth pose, points within 1 m of a surface), lands within 0.3 m / 5 deg of the estimate"
+            );
         }
     }
     Ok(if failed > 0 {
@@ -285,4 +307,27 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// The robot pose that the given truth `sensor` pose (map frame) becomes
+/// when refined against the map with the scan's own points: 30 robust
+/// Gauss-Newton steps (`refloc::refine`), points within 1 m of a surface.
+fn truth_refined<D: AsRef<[u8]>>(
+    db: &refloc::RefDb<D>,
+    beams: &[(f32, f32)],
+    sensor: refloc::Pose2,
+) -> refloc::Pose2 {
+    let pts: Vec<[f32; 2]> = beams
+        .iter()
+        .map(|&(a, r)| {
+            if r.is_finite() {
+                [r * a.cos(), r * a.sin()]
+            } else {
+                [f32::NAN, f32::NAN]
+            }
+        })
+        .collect();
+    let dm = refloc::refine::DistMap::of(db);
+    let (refined, _) = refloc::refine::refine(&dm, &pts, sensor, 30, 1.0);
+    refined.compose(&db.params().sensor.offset.inverse())
 }
