@@ -35,7 +35,12 @@ mkdir -p "$corpus"/{refdb,mapfile,scanio}
 "${mapc[@]}" synth --kind cave --width 60 --height 50 -o "$work" --name cave -q
 "${mapc[@]}" build "$work/cave.yaml" -o "$work/cave.refdb" --fit-queries 0 --beams 32 \
     --fov-windows none -q
-for db in tiny tiny-360 tiny-ms cave; do
+# A coarse-search index forced on the small map, narrow enough to have
+# internal nodes, on both views (full and 180 degrees).
+"${mapc[@]}" build "$work/tiny.yaml" -o "$work/tiny-index.refdb" --fit-queries 0 --beams 48 \
+    --fov-windows 180 --index-min-sites 1 --index-leaf-size 2 --index-beam 2 --index-leaves 2 \
+    --max-points 48 -q
+for db in tiny tiny-360 tiny-ms cave tiny-index; do
     tail -c +17 "$work/$db.refdb" > "$corpus/refdb/$db"
 done
 
