@@ -195,6 +195,36 @@ fn localize_does_not_allocate_on_a_synthetic_office() {
 }
 
 #[test]
+fn localize_does_not_allocate_with_a_coarse_search_index() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let cfg = mapc::pipeline::BuildConfig {
+        fit_queries: 20,
+        index: mapc::index::IndexOptions {
+            min_sites: 1,
+            leaf_size: 4,
+            leaves: 8,
+            beam: 4,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let db = common::build_with(common::office_map(dir.path(), 400, 300, 7), &cfg);
+    let rdb = db.open();
+    assert!(
+        rdb.index().is_some_and(|i| i.node_count() > 3),
+        "the index was forced"
+    );
+    let samples = common::simulate(&rdb, &db.source, 30, 11);
+    let answers = localize_watched(&db, &samples);
+    let ok = report("office with index", &samples, &answers);
+    assert!(
+        ok >= samples.len() / 2,
+        "only {ok} of {} scans answered",
+        samples.len()
+    );
+}
+
+#[test]
 fn localize_does_not_allocate_on_the_intel_map() {
     let yaml = Path::new(common::INTEL_YAML);
     if !yaml.is_file() {

@@ -71,12 +71,19 @@ pub fn office_map(dir: &Path, width: u32, height: u32, seed: u64) -> MapSource {
 
 /// Compiles `source` into a database (in memory, 4-byte aligned).
 pub fn build(source: MapSource, fit_queries: usize) -> Db {
+    build_with(
+        source,
+        &BuildConfig {
+            fit_queries,
+            ..Default::default()
+        },
+    )
+}
+
+/// Compiles `source` with `cfg` into a database (in memory, 4-byte aligned).
+pub fn build_with(source: MapSource, cfg: &BuildConfig) -> Db {
     let t = Instant::now();
-    let cfg = BuildConfig {
-        fit_queries,
-        ..Default::default()
-    };
-    let out = pipeline::build(&source, &cfg).expect("build the database");
+    let out = pipeline::build(&source, cfg).expect("build the database");
     let bytes = encode(&out.sections);
     let mut words = vec![0u32; bytes.len().div_ceil(4)];
     zerocopy::IntoBytes::as_mut_bytes(&mut words[..])[..bytes.len()].copy_from_slice(&bytes);
