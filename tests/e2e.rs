@@ -52,6 +52,28 @@ fn built(dir: &Path, extra: &[&str]) -> PathBuf {
     db
 }
 
+/// `mapc eval` of `db` on 60 static poses (seed 3) into `out`, checked
+/// against the `check` baseline report when given.
+fn eval_static(db: &Path, out: &Path, check: Option<&Path>, cwd: &Path) -> Output {
+    let mut args = vec![
+        "eval",
+        db.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--poses",
+        "60",
+        "--experiments",
+        "static",
+        "--no-figures",
+        "--seed",
+        "3",
+    ];
+    if let Some(c) = check {
+        args.extend(["--check", c.to_str().unwrap()]);
+    }
+    mapc(&args, cwd)
+}
+
 #[test]
 fn build_verify_info_and_determinism() {
     let dir = tempfile::tempdir().unwrap();
@@ -207,36 +229,11 @@ fn eval_check_passes_on_own_baseline_and_fails_on_a_worse_map() {
     let dir = tempfile::tempdir().unwrap();
     let good = built(dir.path(), &[]);
     let out = dir.path().join("eval");
-    let common = [
-        "--poses",
-        "60",
-        "--experiments",
-        "static",
-        "--no-figures",
-        "--seed",
-        "3",
-    ];
-    let mut args = vec![
-        "eval",
-        good.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    args.extend_from_slice(&common);
-    let o = mapc(&args, dir.path());
+    let o = eval_static(&good, &out, None, dir.path());
     assert!(o.status.success(), "{}", text(&o));
     let baseline = dir.path().join("baseline.json");
     std::fs::copy(out.join("report.json"), &baseline).unwrap();
-    let mut args = vec![
-        "eval",
-        good.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--check",
-        baseline.to_str().unwrap(),
-    ];
-    args.extend_from_slice(&common);
-    let o = mapc(&args, dir.path());
+    let o = eval_static(&good, &out, Some(&baseline), dir.path());
     assert!(o.status.success(), "own baseline must pass: {}", text(&o));
     // A deliberately worse database: one candidate and no refinement.
     let worse = dir.path().join("worse.refdb");
@@ -257,16 +254,7 @@ fn eval_check_passes_on_own_baseline_and_fails_on_a_worse_map() {
         dir.path(),
     );
     assert!(o.status.success(), "{}", text(&o));
-    let mut args = vec![
-        "eval",
-        worse.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--check",
-        baseline.to_str().unwrap(),
-    ];
-    args.extend_from_slice(&common);
-    let o = mapc(&args, dir.path());
+    let o = eval_static(&worse, &out, Some(&baseline), dir.path());
     assert_eq!(
         o.status.code(),
         Some(1),
@@ -400,37 +388,11 @@ fn a_coarse_index_is_built_on_request_verified_and_as_good_as_exhaustive_ranking
         db.site_count()
     );
     // Same localization quality as the exhaustive ranking, by eval --check.
-    let common = [
-        "--poses",
-        "60",
-        "--experiments",
-        "static",
-        "--no-figures",
-        "--seed",
-        "3",
-    ];
     let base = dir.path().join("base");
-    let mut args = vec![
-        "eval",
-        plain.to_str().unwrap(),
-        "--out",
-        base.to_str().unwrap(),
-    ];
-    args.extend_from_slice(&common);
-    let o = mapc(&args, dir.path());
+    let o = eval_static(&plain, &base, None, dir.path());
     assert!(o.status.success(), "{}", text(&o));
     let report = base.join("report.json");
-    let out = dir.path().join("idx");
-    let mut args = vec![
-        "eval",
-        indexed.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--check",
-        report.to_str().unwrap(),
-    ];
-    args.extend_from_slice(&common);
-    let o = mapc(&args, dir.path());
+    let o = eval_static(&indexed, &dir.path().join("idx"), Some(&report), dir.path());
     assert!(
         o.status.success(),
         "indexed database regressed: {}",
