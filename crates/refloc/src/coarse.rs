@@ -73,24 +73,9 @@ pub fn rank_top<'h>(
 
 /// As [`rank_top`], from each site's score (site index = position).
 pub fn rank_top_scores(scores: impl Iterator<Item = f32>, top: &mut [Ranked]) -> usize {
-    let cap = top.len();
     let mut n = 0;
     for (s, g) in scores.enumerate() {
-        let better = |a: f32, ai: u32, b: &Ranked| a > b.gamma || (a == b.gamma && ai < b.site);
-        if n < cap || (cap > 0 && better(g, s as u32, &top[cap - 1])) {
-            let mut pos = n.min(cap.saturating_sub(1));
-            if n < cap {
-                n += 1;
-            }
-            while pos > 0 && better(g, s as u32, &top[pos - 1]) {
-                top[pos] = top[pos - 1];
-                pos -= 1;
-            }
-            top[pos] = Ranked {
-                site: s as u32,
-                gamma: g,
-            };
-        }
+        insert_unique(top, &mut n, s as u32, g);
     }
     n
 }
