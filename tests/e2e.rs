@@ -371,7 +371,13 @@ fn a_coarse_index_is_built_on_request_verified_and_as_good_as_exhaustive_ranking
     assert!(o.status.success(), "{}", text(&o));
     let o = mapc(&["info", "--json", indexed.to_str().unwrap()], dir.path());
     assert!(o.status.success(), "{}", text(&o));
-    assert!(text(&o).contains("\"index\""), "{}", text(&o));
+    let info: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(info["index"]["nodes"].as_u64().unwrap() > 3, "{info}");
+    assert_eq!(
+        info["index"]["views"].as_array().unwrap().len(),
+        3,
+        "{info}"
+    );
     // The search scores only part of the sites.
     let bytes = std::fs::read(&indexed).unwrap();
     let mut al = vec![0u32; bytes.len().div_ceil(4)];

@@ -70,6 +70,24 @@ pub fn params_json(p: &refloc::Params) -> Value {
     v
 }
 
+/// The coarse-search index's shape, or null without one.
+fn index_json<D: AsRef<[u8]>>(db: &RefDb<D>) -> Value {
+    let Some(ix) = db.index() else {
+        return Value::Null;
+    };
+    let (beam, leaves) = ix.widths();
+    let views: Vec<String> = ix
+        .kinds()
+        .map(|k| match k {
+            refloc::index::ViewKind::Full => "full".to_string(),
+            refloc::index::ViewKind::Window(w) => {
+                format!("window {:.0} deg", db.params().win_widths[w].to_degrees())
+            }
+        })
+        .collect();
+    json!({"views": views, "nodes": ix.node_count(), "beam": beam, "leaves": leaves})
+}
+
 fn info_json<D: AsRef<[u8]>>(db: &RefDb<D>) -> Value {
     let m = db.meta();
     let sections: Vec<Value> = SectionKind::ALL
@@ -85,6 +103,7 @@ fn info_json<D: AsRef<[u8]>>(db: &RefDb<D>) -> Value {
                  "unknown_blocks": m.unknown_blocks.get() != 0, "free_cells": m.free_cells.get()},
         "sites": db.site_count(),
         "sections": sections,
+        "index": index_json(db),
         "params": params_json(db.params()),
         "manifest": manifest,
     })
@@ -122,6 +141,23 @@ pub fn info(a: InfoArgs) -> CliResult {
             db.section(k).len(),
             db.section_crc(k)
         );
+    }
+    match &j["index"] {
+        Value::Null => outln!("index     none (exhaustive coarse ranking)"),
+        ix => outln!(
+            "index     {} nodes over {}; search keeps {} nodes per level, {} leaves",
+            ix["nodes"],
+            ix["views"]
+                .as_array()
+                .map(|v| v
+                    .iter()
+                    .filter_map(|s| s.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "))
+                .unwrap_or_default(),
+            ix["beam"],
+            ix["leaves"]
+        ),
     }
     outln!("params");
     if let Value::Object(p) = &j["params"] {
