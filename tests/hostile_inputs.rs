@@ -5,14 +5,16 @@
 //! * Scans against a database compiled by `mapc` (a small synthetic office,
 //!   with the 180/270-degree windows and without): beam counts and fields of
 //!   view other than the database's, huge and tiny finite values where the
-//!   unit tests use NaN and infinities, and combinations. Each gives a pose
-//!   with finite numbers or a typed `LocalizeError`, never a panic, and
-//!   `localize` writes nothing outside the scratch it is given (checked with
-//!   guard bytes around an exactly `scratch_size` scratch).
+//!   unit tests use NaN and infinities, combinations, and a 100,000-beam
+//!   scan with a scratch sized for it. Each gives a pose with finite numbers
+//!   or a typed `LocalizeError`, never a panic, and `localize` writes
+//!   nothing outside the scratch it is given (checked with guard bytes
+//!   around an exactly `scratch_size` scratch).
 //! * Degenerate maps through `pipeline::build`: one colour, free space
 //!   without a GVD vertex, 1-cell-wide corridors, unknown-only, a single free
-//!   cell, free space running off the image. Each gives a clear error or a
-//!   database that reads back, verifies and localizes without a panic.
+//!   cell, free space running off the image, 16-bit PGM. Each gives a clear
+//!   error or a database that reads back, verifies and localizes without a
+//!   panic.
 //!
 //! `--nocapture` prints the tally of outcomes and the degenerate maps'
 //! results; `HOSTILE_DEBUG=1` also prints every pose and whether it was
@@ -158,6 +160,24 @@ fn open(words: &[u32], len: usize) -> RefDb<&[u8]> {
     db
 }
 
+/// The office database with the windows (aligned words and byte length, for
+/// [`open`]) and a free pose in it with 0.5 m clearance.
+fn office_and_pose() -> (Vec<u32>, usize, Pose2) {
+    let (src, with, _) = office();
+    let mut rng = Rng::new(5);
+    let truth = common::free_pose(&src, 0.5, &mut rng);
+    (aligned(&with), with.len(), truth)
+}
+
+/// A noise-free full-turn scan of `beams` beams (30 m) at `pose`: the
+/// scanner, its ranges and the same returns as points.
+fn full_turn(db: &RefDb<&[u8]>, pose: &Pose2, beams: usize) -> (Lidar, Vec<f32>, Vec<[f32; 2]>) {
+    let lidar = Lidar::new(beams, 2.0 * PI, 30.0);
+    let ranges = sim::virtual_scan(&db.grid(), &db.frame(), pose, &lidar);
+    let points = sim::to_points(&ranges, &lidar);
+    (lidar, ranges, points)
+}
+
 #[test]
 fn scans_unlike_the_database_give_a_pose_or_a_typed_error() {
     let (src, with, without) = office();
@@ -212,13 +232,10 @@ fn scans_unlike_the_database_give_a_pose_or_a_typed_error() {
 
 #[test]
 fn extreme_finite_values_give_a_pose_or_a_typed_error() {
-    let (src, with, _) = office();
-    let w = aligned(&with);
-    let db = open(&w, with.len());
+    let (w, len, truth) = office_and_pose();
+    let db = open(&w, len);
     let grid = db.grid();
     let frame = db.frame();
-    let mut rng = Rng::new(5);
-    let truth = common::free_pose(&src, 0.5, &mut rng);
     let lidar = Lidar::new(362, 2.0 * PI, 30.0);
     let good = sim::virtual_scan(&grid, &frame, &truth, &lidar);
     let base = RangeScan {
@@ -627,14 +644,9 @@ fn one_colour_images_load_or_fail_clearly() {
 /// can pass for a full turn).
 #[test]
 fn invalid_points_do_not_change_the_answer() {
-    let (src, with, _) = office();
-    let w = aligned(&with);
-    let db = open(&w, with.len());
-    let mut rng = Rng::new(5);
-    let truth = common::free_pose(&src, 0.5, &mut rng);
-    let lidar = Lidar::new(362, 2.0 * PI, 30.0);
-    let good = sim::virtual_scan(&db.grid(), &db.frame(), &truth, &lidar);
-    let good_pts = sim::to_points(&good, &lidar);
+    let (w, len, truth) = office_and_pose();
+    let db = open(&w, len);
+    let (_, _, good_pts) = full_turn(&db, &truth, 362);
     let answer = |bad: [f32; 2]| {
         let mut pts = good_pts.clone();
         for p in pts.iter_mut().step_by(4) {
@@ -655,4 +667,99 @@ fn invalid_points_do_not_change_the_answer() {
     for bad in [[f32::MAX, -f32::MAX], [1e30, -1e30], [100.0, -100.0]] {
         assert_eq!(answer(bad), reference, "invalid points at {bad:?}");
     }
+}
+
+/// A 100,000-beam full-turn scan with a scratch sized for it (the unit test
+/// `localize_rejects_a_scan_larger_than_the_scratch` gives it one sized for
+/// 362 beams: `TooManyBeams`). The scan is thinned to `max_points` before
+/// any pairwise work, so the scratch stays small and the answer is the one
+/// a 362-beam scan gives: right, as ranges and as points.
+#[test]
+fn a_100000_beam_scan_localizes_in_a_scratch_sized_for_it() {
+    let (w, len, truth) = office_and_pose();
+    let db = open(&w, len);
+    let (lidar, r, pts) = full_turn(&db, &truth, 100_000);
+    let needed = scratch_size(db.params(), r.len());
+    assert!(
+        needed < 16 << 20,
+        "scratch for 100,000 beams: {needed} bytes"
+    );
+    let scans = [
+        (
+            "100,000 beams",
+            Scan::Ranges(RangeScan {
+                ranges: &r,
+                ..geometry(&lidar)
+            }),
+        ),
+        (
+            "100,000 points",
+            Scan::Points {
+                points: &pts,
+                range_max: 30.0,
+            },
+        ),
+    ];
+    for (what, scan) in &scans {
+        let t = std::time::Instant::now();
+        let out = run(&db, scan, what);
+        assert!(
+            matches!(out, Outcome::Pose { accepted: true }),
+            "{what}: {out:?}"
+        );
+        let mut scratch = vec![0u8; needed];
+        let pose = localize(&db, scan, &mut scratch).unwrap().pose;
+        let (err, _) = common::error(&pose, &truth);
+        assert!(err < 0.1, "{what}: {pose:?} vs truth {truth:?}");
+        eprintln!("{what}: scratch {needed} bytes, {:?}", t.elapsed());
+    }
+}
+
+/// 16-bit PGM maps (maxval 65535, and 1000: any maxval over 255 is two bytes
+/// a sample) load to the same cells as the 8-bit image and build the same
+/// reference sites; a 16-bit header claiming 40000 x 40000 in a 23-byte file is
+/// refused ("truncated") before any pixel buffer is allocated.
+#[test]
+fn sixteen_bit_pgm_maps_load_and_build_like_8_bit_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    // A room with a pillar, unknown outside.
+    let (w, h) = (70usize, 50usize);
+    let px: Vec<u8> = (0..w * h)
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            if !(5..65).contains(&x) || !(5..45).contains(&y) {
+                205
+            } else if !(7..63).contains(&x)
+                || !(7..43).contains(&y)
+                || (30..36).contains(&x) && (20..26).contains(&y)
+            {
+                0
+            } else {
+                254
+            }
+        })
+        .collect();
+    let load = |name: &str, bytes: Vec<u8>| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, bytes).unwrap();
+        mapfile::load_image(&p, Some(0.05), None)
+    };
+    let mut pgm8 = format!("P5\n{w} {h}\n255\n").into_bytes();
+    pgm8.extend_from_slice(&px);
+    let m8 = load("m8.pgm", pgm8).unwrap();
+    let sites = build_degenerate("8-bit PGM", &m8).unwrap();
+    for maxval in [65535u32, 1000] {
+        let mut pgm16 = format!("P5\n{w} {h}\n{maxval}\n").into_bytes();
+        for &v in &px {
+            let s = ((v as u32 * maxval + 127) / 255) as u16;
+            pgm16.extend_from_slice(&s.to_be_bytes());
+        }
+        let what = format!("16-bit PGM, maxval {maxval}");
+        let m16 = load(&format!("m{maxval}.pgm"), pgm16).unwrap();
+        assert!(m16.grid.cells == m8.grid.cells, "{what}: cells differ");
+        assert_eq!(build_degenerate(&what, &m16), Ok(sites), "{what}");
+    }
+    let e = load("huge.pgm", b"P5\n40000 40000\n65535\n\x00\x00".to_vec()).unwrap_err();
+    assert!(matches!(e, MapError::ImageDecode { .. }), "{e}");
+    assert!(e.to_string().contains("truncated"), "{e}");
 }
