@@ -138,8 +138,10 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             .unwrap_or(k);
         let gt = truth.get(&scan_index).copied();
         // The scan's beams as (angle in the sensor frame (rad), range (m)),
-        // non-returns infinite: for judging the given truth pose.
+        // non-returns infinite: for judging the given truth pose (only
+        // made when there is one).
         let beams: Vec<(f32, f32)> = match &scan.data {
+            _ if gt.is_none() => Vec::new(),
             ScanData::Ranges {
                 angle_min,
                 angle_increment,
