@@ -1,7 +1,9 @@
 //! `refloc::localize` never touches the heap: a counting global allocator
 //! records every allocation, deallocation and reallocation made by the
 //! current thread while a thread-local flag is set, and the localizer runs
-//! on real compiled maps with the flag set.
+//! on real compiled maps with the flag set. The counts are per thread too,
+//! so tests running at the same time (one of them allocates on purpose)
+//! cannot add to each other's.
 //!
 //! Registered as an integration test of the mapc package (it needs the
 //! compiler to make its database).
@@ -11,59 +13,60 @@ mod common;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use common::{Db, Sample};
 use refloc::{localize, scratch_size, LocalizeError, Pose2};
-
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-static DEALLOCS: AtomicUsize = AtomicUsize::new(0);
-static REALLOCS: AtomicUsize = AtomicUsize::new(0);
 
 thread_local! {
     /// Set while the current thread is being watched. `const`-initialized
     /// with no destructor, so reading it never allocates.
     static WATCHED: Cell<bool> = const { Cell::new(false) };
+    /// This thread's counts while watched (allocations, deallocations,
+    /// reallocations); `const`-initialized like `WATCHED`.
+    static COUNTS: Cell<Counts> = const { Cell::new(Counts { allocs: 0, deallocs: 0, reallocs: 0 }) };
 }
 
 fn watched() -> bool {
     WATCHED.try_with(Cell::get).unwrap_or(false)
 }
 
+/// Adds one call to this thread's counts when it is watched.
+fn note(f: fn(&mut Counts)) {
+    if watched() {
+        let _ = COUNTS.try_with(|c| {
+            let mut v = c.get();
+            f(&mut v);
+            c.set(v);
+        });
+    }
+}
+
 /// `System`, counting the calls made by a watched thread.
 struct Counting;
 
 // SAFETY: every call is forwarded unchanged to `System`; the counting only
-// touches atomics and a const thread-local `Cell`, neither of which allocates.
+// touches const thread-local `Cell`s, which do not allocate.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if watched() {
-            ALLOCS.fetch_add(1, Ordering::Relaxed);
-        }
+        note(|c| c.allocs += 1);
         // SAFETY: forwarded with the caller's guarantees.
         unsafe { System.alloc(layout) }
     }
 
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        if watched() {
-            ALLOCS.fetch_add(1, Ordering::Relaxed);
-        }
+        note(|c| c.allocs += 1);
         // SAFETY: forwarded with the caller's guarantees.
         unsafe { System.alloc_zeroed(layout) }
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        if watched() {
-            DEALLOCS.fetch_add(1, Ordering::Relaxed);
-        }
+        note(|c| c.deallocs += 1);
         // SAFETY: forwarded with the caller's guarantees.
         unsafe { System.dealloc(ptr, layout) }
     }
 
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if watched() {
-            REALLOCS.fetch_add(1, Ordering::Relaxed);
-        }
+        note(|c| c.reallocs += 1);
         // SAFETY: forwarded with the caller's guarantees.
         unsafe { System.realloc(ptr, layout, new_size) }
     }
@@ -79,12 +82,9 @@ struct Counts {
     reallocs: usize,
 }
 
+/// This thread's counts so far.
 fn counts() -> Counts {
-    Counts {
-        allocs: ALLOCS.load(Ordering::Relaxed),
-        deallocs: DEALLOCS.load(Ordering::Relaxed),
-        reallocs: REALLOCS.load(Ordering::Relaxed),
-    }
+    COUNTS.with(Cell::get)
 }
 
 /// Runs `f` with the current thread watched; returns what it did to the heap.
