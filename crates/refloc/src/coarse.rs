@@ -128,10 +128,10 @@ pub fn rank_sites<D: AsRef<[u8]>>(
         None => ViewKind::Full,
         Some(w) => ViewKind::Window(w),
     };
-    if let Some(index) = db.index().filter(|i| i.has(kind)) {
+    if let Some(index) = db.index() {
         let headings = (db.params().win_headings as usize).max(1);
         let mut n = 0usize;
-        index.search(kind, hist, |e| {
+        let searched = index.search(kind, hist, |e| {
             let e = e as usize;
             let (site, g) = match kind {
                 ViewKind::Full => (e, correlation(hist, db.hist(e))),
@@ -142,7 +142,10 @@ pub fn rank_sites<D: AsRef<[u8]>>(
             };
             insert_unique(top, &mut n, site as u32, g);
         });
-        return n;
+        // `None`: the index has no tree for this view.
+        if searched.is_some() {
+            return n;
+        }
     }
     rank_top_scores(
         (0..db.site_count()).map(|s| site_score(db, hist, window, s)),

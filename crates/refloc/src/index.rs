@@ -157,43 +157,35 @@ pub fn validate(bytes: &[u8], params: &Params, sites: usize) -> Result<(), &'sta
     if bytes.is_empty() {
         return Ok(());
     }
-    let (_, views, nodes, entries, cents) = split(bytes, params, sites)?;
-    let (mut n0, mut e0, mut c0) = (0usize, 0usize, 0usize);
-    for v in views {
-        let kind = ViewKind::from_raw(v.kind.get(), params).ok_or("index view kind")?;
-        let nn = v.node_count.get() as usize;
-        let ne = v.entry_count.get() as usize;
-        let cells = kind.cells(params);
-        let limit = kind.entries_for(params, sites);
-        for (i, n) in nodes[n0..n0 + nn].iter().enumerate() {
+    let index = Index::from_parts(split(bytes, params, sites)?, params);
+    for (kind, view) in index.each_view() {
+        let (nn, ne) = (view.nodes.len() as u64, view.entries.len() as u64);
+        for (i, n) in view.nodes.iter().enumerate() {
             let (first, count) = (n.first.get() as u64, n.count.get() as u64);
             match n.leaf.get() {
                 0 => {
                     if count == 0 || count > INDEX_CHILDREN_MAX as u64 {
                         return Err("index node child count");
                     }
-                    if first <= i as u64 || first + count > nn as u64 {
+                    if first <= i as u64 || first + count > nn {
                         return Err("index node children");
                     }
                 }
                 1 => {
-                    if first + count > ne as u64 {
+                    if first + count > ne {
                         return Err("index leaf entries");
                     }
                 }
                 _ => return Err("index node flag"),
             }
         }
-        if entries[e0..e0 + ne].iter().any(|&e| e as u64 >= limit) {
+        let limit = kind.entries_for(params, sites);
+        if view.entries.iter().any(|&e| e as u64 >= limit) {
             return Err("index entry value");
         }
-        let nc = nn * cells;
-        if cents[c0..c0 + nc].iter().any(|c| !c.is_finite()) {
+        if view.centroids.iter().any(|c| !c.is_finite()) {
             return Err("index centroid value");
         }
-        n0 += nn;
-        e0 += ne;
-        c0 += nc;
     }
     Ok(())
 }
@@ -205,22 +197,12 @@ impl<'a> Index<'a> {
         if bytes.is_empty() {
             return None;
         }
-        let (header, views, nodes, entries, centroids) = split(bytes, params, sites).ok()?;
-        Some(Index {
-            header,
-            views,
-            nodes,
-            entries,
-            centroids,
-            params,
-        })
+        Some(Index::from_parts(split(bytes, params, sites).ok()?, params))
     }
 
     /// The stored views, in order.
     pub fn kinds(&self) -> impl Iterator<Item = ViewKind> + '_ {
-        self.views
-            .iter()
-            .filter_map(|v| ViewKind::from_raw(v.kind.get(), self.params))
+        self.each_view().map(|(kind, _)| kind)
     }
 
     /// (internal nodes kept per level, leaves scored) of the search.
@@ -236,26 +218,47 @@ impl<'a> Index<'a> {
         self.nodes.len()
     }
 
-    fn view(&self, want: ViewKind) -> Option<View<'a>> {
-        let (mut n0, mut e0, mut c0) = (0usize, 0usize, 0usize);
-        for v in self.views {
-            let kind = ViewKind::from_raw(v.kind.get(), self.params)?;
-            let nn = v.node_count.get() as usize;
-            let ne = v.entry_count.get() as usize;
-            let cells = kind.cells(self.params);
-            if kind == want {
-                return Some(View {
-                    nodes: self.nodes.get(n0..n0 + nn)?,
-                    entries: self.entries.get(e0..e0 + ne)?,
-                    centroids: self.centroids.get(c0..c0 + nn * cells)?,
-                    cells,
-                });
-            }
-            n0 += nn;
-            e0 += ne;
-            c0 += nn * cells;
+    fn from_parts(
+        (header, views, nodes, entries, centroids): Parts<'a>,
+        params: &'a Params,
+    ) -> Self {
+        Index {
+            header,
+            views,
+            nodes,
+            entries,
+            centroids,
+            params,
         }
-        None
+    }
+
+    /// Every view with its slices, in order: each view's nodes, entries and
+    /// centroids follow the previous view's (the one place that lays them
+    /// out; a view whose slices would not fit ends the walk).
+    fn each_view(&self) -> impl Iterator<Item = (ViewKind, View<'a>)> + '_ {
+        self.views
+            .iter()
+            .scan((0usize, 0usize, 0usize), |(n0, e0, c0), v| {
+                let kind = ViewKind::from_raw(v.kind.get(), self.params)?;
+                let (nn, ne) = (v.node_count.get() as usize, v.entry_count.get() as usize);
+                let cells = kind.cells(self.params);
+                let view = View {
+                    nodes: self.nodes.get(*n0..*n0 + nn)?,
+                    entries: self.entries.get(*e0..*e0 + ne)?,
+                    centroids: self.centroids.get(*c0..*c0 + nn * cells)?,
+                    cells,
+                };
+                *n0 += nn;
+                *e0 += ne;
+                *c0 += nn * cells;
+                Some((kind, view))
+            })
+    }
+
+    fn view(&self, want: ViewKind) -> Option<View<'a>> {
+        self.each_view()
+            .find(|(kind, _)| *kind == want)
+            .map(|(_, view)| view)
     }
 
     /// True when the index has a tree for `kind`.
