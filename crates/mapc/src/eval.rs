@@ -839,3 +839,65 @@ pub fn check(
     }
     out
 }
+
+/// The robot pose that the given truth `sensor` pose (map frame) becomes
+/// when corrected locally against the map with the scan's own points: the
+/// best pose of a search within 0.5 m (0.1 m steps) and 15 degrees (1 degree
+/// steps) of the truth, scored by the summed squared distance of the points
+/// to the nearest surface (capped at 0.3 m), then 30 robust Gauss-Newton
+/// steps (`refloc::refine`, points within 1 m of a surface). The search
+/// uses only the truth, the scan and the map, never the localizer's result.
+///
+/// `beams` are (angle in the sensor frame (rad), range (m)) pairs, no return
+/// as a non-finite range; `sensor` is the given truth's sensor pose (map
+/// frame, m and rad). Returns the corrected *robot* pose (map frame). For
+/// logs whose poses come from another SLAM run than the map (the shared
+/// CARMEN logs), where the given pose can be off by more than the
+/// correctness tolerance although the map places the scan unambiguously.
+pub fn correct_truth_locally<D: AsRef<[u8]>>(
+    db: &RefDb<D>,
+    beams: &[(f32, f32)],
+    sensor: Pose2,
+) -> Pose2 {
+    let pts: Vec<[f32; 2]> = beams
+        .iter()
+        .map(|&(a, r)| {
+            if r.is_finite() {
+                [r * a.cos(), r * a.sin()]
+            } else {
+                [f32::NAN, f32::NAN]
+            }
+        })
+        .collect();
+    let dm = refloc::refine::DistMap::of(db);
+    let cap = 0.3f32;
+    let cost = |p: &Pose2| -> f32 {
+        let (s, c) = p.theta.sin_cos();
+        pts.iter()
+            .filter(|q| q[0].is_finite())
+            .map(|q| {
+                let m = [p.x + c * q[0] - s * q[1], p.y + s * q[0] + c * q[1]];
+                let d = dm.sample(m).map_or(cap, |(d, _)| d.abs().min(cap));
+                d * d
+            })
+            .sum()
+    };
+    let mut best = (cost(&sensor), sensor);
+    for dt in -15..=15 {
+        for dx in -5..=5 {
+            for dy in -5..=5 {
+                let p = Pose2::new(
+                    sensor.x + 0.1 * dx as f32,
+                    sensor.y + 0.1 * dy as f32,
+                    sensor.theta + (dt as f32).to_radians(),
+                );
+                let c = cost(&p);
+                if c < best.0 {
+                    best = (c, p);
+                }
+            }
+        }
+    }
+    let (refined, _) = refloc::refine::refine(&dm, &pts, best.1, 30, 1.0);
+    refined.compose(&db.params().sensor.offset.inverse())
+}
