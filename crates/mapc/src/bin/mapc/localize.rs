@@ -31,7 +31,9 @@ pub struct Args {
     #[arg(long, default_value_t = 30.0, value_name = "M")]
     pub range_max: f32,
     /// Ground truth in the map frame, `index ... x y theta` per line (the
-    /// shared `*-poses-in-map.txt` format): adds errors and a summary.
+    /// shared `*-poses-in-map.txt` format): adds errors and a summary, also
+    /// against each truth pose corrected locally against the map
+    /// (`truth_refined` in the JSON; see docs/results.md).
     #[arg(long, value_name = "FILE")]
     pub truth: Option<PathBuf>,
     /// Leave the candidate list out of the JSON output.
