@@ -154,7 +154,9 @@ pub struct Candidate {
     pub vicinity: f32,
     /// Vicinity threshold.
     pub vicinity_threshold: f32,
-    /// 1 when SSM produced a pose, 0 otherwise.
+    /// 1 when SSM produced a pose, 0 otherwise (no match, or skipped by the
+    /// early stop's confirmation as near the best pose: see
+    /// [`CONFIRM_SKIP_RADIUS`]).
     pub has_pose: u32,
     /// Input beams shorter than the map predicts at this pose (see [`crate::verify::Vicinity`]).
     pub short_beams: u32,
