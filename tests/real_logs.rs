@@ -50,11 +50,6 @@ fn csail_log_against_csail_map() {
     // against the locally corrected truth; given truth off by more than the
     // tolerance).
     type Outcome = (bool, bool, f64, bool, bool, bool);
-    let within = |a: [f64; 3], b: [f64; 3]| {
-        let e = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
-        let et = refloc::wrap_angle((a[2] - b[2]) as f32).abs();
-        (e < 0.3 && et < 5f32.to_radians(), e)
-    };
     let results: Vec<Outcome> = scans
         .par_iter()
         .enumerate()
@@ -79,27 +74,17 @@ fn csail_log_against_csail_map() {
                 ranges,
             });
             let g = truth[&k];
-            let beams: Vec<(f32, f32)> = ranges
-                .iter()
-                .enumerate()
-                .map(|(i, &r)| {
-                    let ok = r.is_finite() && r >= *range_min && r <= *range_max;
-                    (
-                        angle_min + i as f32 * angle_increment,
-                        if ok { r } else { f32::INFINITY },
-                    )
-                })
-                .collect();
+            let beams = s.data.beams();
             let sensor = refloc::Pose2::new(g[0] as f32, g[1] as f32, g[2] as f32)
                 .compose(&db.params().sensor.offset);
             let c = mapc::eval::correct_truth_locally(&db, &beams, sensor);
+            let truth_off = !mapc::eval::within_tolerance(&c, g);
             let c = [c.x as f64, c.y as f64, c.theta as f64];
-            let truth_off = !within(g, c).0;
             match localize(&db, &scan, &mut scratch) {
                 Ok(l) => {
-                    let est = [l.pose.x as f64, l.pose.y as f64, l.pose.theta as f64];
-                    let (ok, e) = within(est, g);
-                    let (ok_c, _) = within(est, c);
+                    let ok = mapc::eval::within_tolerance(&l.pose, g);
+                    let (e, _) = mapc::eval::pose_error(&l.pose, g);
+                    let ok_c = mapc::eval::within_tolerance(&l.pose, c);
                     (
                         l.accepted && ok,
                         l.accepted && !ok,

@@ -30,6 +30,21 @@ pub const CORRECT_POS: f64 = 0.3;
 /// A heading error below this counts as correct (rad): 5 degrees.
 pub const CORRECT_THETA: f64 = 5.0 * std::f64::consts::PI / 180.0;
 
+/// Position error (m) and absolute heading error (rad) of the estimate
+/// `est` (map frame) against the pose `truth` (x m, y m, theta rad).
+pub fn pose_error(est: &Pose2, truth: [f64; 3]) -> (f64, f64) {
+    let e = ((est.x as f64 - truth[0]).powi(2) + (est.y as f64 - truth[1]).powi(2)).sqrt();
+    let et = refloc::wrap_angle(est.theta - truth[2] as f32).abs() as f64;
+    (e, et)
+}
+
+/// True when `est` is within [`CORRECT_POS`] and [`CORRECT_THETA`] of
+/// `truth` (see [`pose_error`]).
+pub fn within_tolerance(est: &Pose2, truth: [f64; 3]) -> bool {
+    let (e, et) = pose_error(est, truth);
+    e < CORRECT_POS && et < CORRECT_THETA
+}
+
 /// Simulated-scan options.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ScanSpec {

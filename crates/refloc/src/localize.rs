@@ -424,28 +424,6 @@ pub fn localize<'s, D: AsRef<[u8]>>(
     let mut confirm_floor: Option<f32> = None;
     let mut confirmed = 0usize;
     for (c, r) in top[..nc].iter().enumerate() {
-        if confirm_floor.is_some_and(|f| r.gamma < f) || confirmed >= CONFIRM_MAX {
-            examined = c;
-            break;
-        }
-        // While confirming, a site near the best pose would only find that
-        // pose again: skip it.
-        if let (Some(_), Some(b)) = (confirm_floor, best) {
-            let sxy = db.site_xy(r.site as usize);
-            let (dx, dy) = (sxy[0] - cands[b].x, sxy[1] - cands[b].y);
-            if dx * dx + dy * dy < CONFIRM_SKIP_RADIUS * CONFIRM_SKIP_RADIUS {
-                cands[c] = Candidate {
-                    site: r.site,
-                    rank: c as u32,
-                    gamma: r.gamma,
-                    ..Candidate::default()
-                };
-                continue;
-            }
-        }
-        if confirm_floor.is_some() {
-            confirmed += 1;
-        }
         let site = r.site as usize;
         let mut cand = Candidate {
             site: r.site,
@@ -453,6 +431,20 @@ pub fn localize<'s, D: AsRef<[u8]>>(
             gamma: r.gamma,
             ..Candidate::default()
         };
+        if let (Some(floor), Some(b)) = (confirm_floor, best) {
+            if r.gamma < floor || confirmed >= CONFIRM_MAX {
+                examined = c;
+                break;
+            }
+            // A site near the best pose would only find that pose again.
+            let sxy = db.site_xy(site);
+            let (dx, dy) = (sxy[0] - cands[b].x, sxy[1] - cands[b].y);
+            if dx * dx + dy * dy < CONFIRM_SKIP_RADIUS * CONFIRM_SKIP_RADIUS {
+                cands[c] = cand;
+                continue;
+            }
+            confirmed += 1;
+        }
         let n = prep::ranges_to_points(
             db.scan(site),
             s.angle_min,

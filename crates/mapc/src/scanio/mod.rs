@@ -98,6 +98,35 @@ impl ScanData {
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
+
+    /// The beams as (bearing in the sensor frame (rad), range (m)) pairs:
+    /// a range outside `[range_min, range_max]` or non-finite (no return)
+    /// becomes infinite; points give their bearing and distance.
+    pub fn beams(&self) -> Vec<(f32, f32)> {
+        match self {
+            ScanData::Ranges {
+                angle_min,
+                angle_increment,
+                range_min,
+                range_max,
+                ranges,
+            } => ranges
+                .iter()
+                .enumerate()
+                .map(|(i, &r)| {
+                    let ok = r.is_finite() && r >= *range_min && r <= *range_max;
+                    (
+                        angle_min + i as f32 * angle_increment,
+                        if ok { r } else { f32::INFINITY },
+                    )
+                })
+                .collect(),
+            ScanData::Points { points, .. } => points
+                .iter()
+                .map(|p| (p[1].atan2(p[0]), p[0].hypot(p[1])))
+                .collect(),
+        }
+    }
 }
 
 /// Why one input line could not be read as a scan.

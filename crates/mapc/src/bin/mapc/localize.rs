@@ -143,28 +143,10 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         // The scan's beams as (angle in the sensor frame (rad), range (m)),
         // non-returns infinite: for judging the given truth pose (only
         // made when there is one).
-        let beams: Vec<(f32, f32)> = match &scan.data {
-            _ if gt.is_none() => Vec::new(),
-            ScanData::Ranges {
-                angle_min,
-                angle_increment,
-                range_min,
-                range_max,
-                ranges,
-            } => (0..ranges.len())
-                .map(|i| {
-                    let r = ranges[i];
-                    let ok = r.is_finite() && r >= *range_min && r <= *range_max;
-                    (
-                        angle_min + i as f32 * angle_increment,
-                        if ok { r } else { f32::INFINITY },
-                    )
-                })
-                .collect(),
-            ScanData::Points { points, .. } => points
-                .iter()
-                .map(|p| (p[1].atan2(p[0]), p[0].hypot(p[1])))
-                .collect(),
+        let beams = if gt.is_some() {
+            scan.data.beams()
+        } else {
+            Vec::new()
         };
         let rmax = match &scan.data {
             ScanData::Ranges { range_max, .. } | ScanData::Points { range_max, .. } => *range_max,
@@ -173,67 +155,54 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             refloc::Pose2::new(g[0] as f32, g[1] as f32, g[2] as f32)
                 .compose(&db.params().sensor.offset)
         });
-        // How well the given truth pose itself explains the scan (M / max):
-        // a low value means the truth and the map disagree there.
-        let truth_fit = truth_sensor.map(|sensor| {
+        // How well a sensor pose explains the scan (M / max): a low value at
+        // the given truth means the truth and the map disagree there.
+        let fit = |sensor: &refloc::Pose2| {
             let grid = db.grid();
             let v = refloc::verify::Verifier::new(&db, &grid, rmax)
-                .score(&sensor, beams.iter().copied());
+                .score(sensor, beams.iter().copied());
             (v.score / (4.5 * v.pairs.max(1) as f32)) as f64
-        });
-        // The given truth refined against the map with the scan's own
-        // points (a local fit from the truth pose, not a search): where the
+        };
+        let truth_fit = truth_sensor.as_ref().map(fit);
+        // The given truth corrected locally against the map with the scan's
+        // own points (a search near the truth pose, then a fit): where the
         // map puts the scan near the truth. A second reference for the
         // figures where the truth and the map disagree.
-        let refined_truth = truth_sensor.map(|sensor| truth_refined(&db, &beams, sensor));
-        let refined_fit = refined_truth.map(|r| {
-            let grid = db.grid();
-            let v = refloc::verify::Verifier::new(&db, &grid, rmax).score(
-                &r.compose(&db.params().sensor.offset),
-                beams.iter().copied(),
-            );
-            (v.score / (4.5 * v.pairs.max(1) as f32)) as f64
-        });
+        let refined_truth =
+            truth_sensor.map(|sensor| mapc::eval::correct_truth_locally(&db, &beams, sensor));
+        let refined_fit = refined_truth.map(|r| fit(&r.compose(&db.params().sensor.offset)));
         match r {
             Ok(l) => {
                 if l.accepted {
                     accepted += 1;
                 }
-                let err = gt.map(|g| {
-                    let e = ((l.pose.x as f64 - g[0]).powi(2) + (l.pose.y as f64 - g[1]).powi(2))
-                        .sqrt();
-                    let et = refloc::wrap_angle(l.pose.theta - g[2] as f32).abs() as f64;
-                    (e, et)
+                let err = gt.map(|g| mapc::eval::pose_error(&l.pose, g));
+                // Within the tolerance of the corrected truth.
+                let ok_refined = refined_truth.map(|r| {
+                    mapc::eval::within_tolerance(&l.pose, [r.x as f64, r.y as f64, r.theta as f64])
                 });
-                if let (Some(r), true) = (refined_truth, l.accepted) {
-                    let e = ((l.pose.x - r.x).powi(2) + (l.pose.y - r.y).powi(2)).sqrt();
-                    let et = refloc::wrap_angle(l.pose.theta - r.theta).abs();
-                    if e < 0.3 && et < 5f32.to_radians() {
+                if let (Some(ok), true) = (ok_refined, l.accepted) {
+                    if ok {
                         correct_refined += 1;
                     } else {
                         false_acc_refined += 1;
                     }
                 }
-                if let Some((e, et)) = err {
-                    let ok = e < 0.3 && et < 5f64.to_radians();
-                    if l.accepted && ok {
+                if let Some(g) = gt {
+                    if l.accepted && mapc::eval::within_tolerance(&l.pose, g) {
                         correct += 1;
-                        errs.push(e);
+                        errs.extend(err.map(|(e, _)| e));
                     } else if l.accepted {
                         false_acc += 1;
                         let ours = (l.vicinity / (4.5 * l.valid_points.max(1) as f32)) as f64;
                         if truth_fit.is_some_and(|t| t < ours - 0.2) {
                             false_acc_truth_fits_worse += 1;
                         }
-                        // Where does the given truth go when it is itself
-                        // refined against the map? Onto the estimate means
-                        // the map puts the scan where we did.
-                        if let Some(r) = refined_truth {
-                            let d = ((r.x - l.pose.x).powi(2) + (r.y - l.pose.y).powi(2)).sqrt();
-                            let dt = refloc::wrap_angle(r.theta - l.pose.theta).abs();
-                            if d < 0.3 && dt < 5f32.to_radians() {
-                                false_acc_truth_refines_to_ours += 1;
-                            }
+                        // Where does the given truth go when it is corrected
+                        // against the map? Onto the estimate means the map
+                        // puts the scan where we did.
+                        if ok_refined == Some(true) {
+                            false_acc_truth_refines_to_ours += 1;
                         }
                     }
                 }
@@ -341,14 +310,4 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     } else {
         ExitCode::SUCCESS
     })
-}
-
-/// The given truth (sensor pose, map frame) corrected locally against the
-/// map: see [`mapc::eval::correct_truth_locally`].
-fn truth_refined<D: AsRef<[u8]>>(
-    db: &refloc::RefDb<D>,
-    beams: &[(f32, f32)],
-    sensor: refloc::Pose2,
-) -> refloc::Pose2 {
-    mapc::eval::correct_truth_locally(db, beams, sensor)
 }
