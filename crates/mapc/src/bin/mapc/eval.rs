@@ -12,7 +12,7 @@ use mapc::rng::Rng;
 use serde_json::{json, Value};
 
 use crate::util::outln;
-use crate::util::{fail_err, input_err, open_db, CliResult, Ui};
+use crate::util::{fail_err, input_err, open_db, read_aux_text, CliResult, Ui};
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct Args {
@@ -104,6 +104,11 @@ fn fmt_summary(name: &str, s: &Summary) -> String {
 }
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
+    // The baseline is read before the evaluation, so a bad one fails fast.
+    let baseline = match &a.check {
+        Some(base) => Some(read_aux_text(base, "--check")?),
+        None => None,
+    };
     let report = evaluate(&a, ui)?;
     std::fs::create_dir_all(&a.out)
         .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.out.display())))?;
@@ -114,9 +119,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     )
     .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", path.display())))?;
     ui.note(&format!("report: {}", path.display()));
-    if let Some(base) = &a.check {
-        let text = std::fs::read_to_string(base)
-            .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", base.display())))?;
+    if let (Some(base), Some(text)) = (&a.check, baseline) {
         let b: Value = serde_json::from_str(&text)
             .map_err(|e| input_err(anyhow::anyhow!("{}: not a report: {e}", base.display())))?;
         let parse = |v: &Value| -> Vec<(String, Summary)> {

@@ -10,7 +10,71 @@ use mapc::scanio::{self, InputFormat, ReadOptions, ScanData};
 use refloc::{localize, scratch_size, RangeScan, Scan};
 use serde_json::json;
 
-use crate::util::{input_err, open_db, CliResult, Ui};
+use crate::util::{fail_err, input_err, open_db, CliError, CliResult, Ui};
+
+/// Where the results go: standard output, every write checked.
+///
+/// A write error (a full disk, `> /dev/full`) ends the run with exit 1 and
+/// says so; a closed pipe (`| head -1`) stops the run quietly, since nobody
+/// reads the rest. When the scans come from a stream (stdin, a FIFO), each
+/// result is flushed as soon as it is computed, so a live consumer sees it
+/// before the next scan arrives; from a regular file the output is buffered.
+struct Sink<W: Write> {
+    out: std::io::BufWriter<W>,
+    flush_each: bool,
+}
+
+/// What became of one write.
+#[derive(Debug, PartialEq, Eq)]
+enum Written {
+    /// The line is out (or in the buffer).
+    Ok,
+    /// The reader has gone: stop localizing.
+    Closed,
+}
+
+impl<W: Write> Sink<W> {
+    fn new(w: W, flush_each: bool) -> Sink<W> {
+        Sink {
+            out: std::io::BufWriter::new(w),
+            flush_each,
+        }
+    }
+
+    /// Writes one line (a newline is added).
+    fn line(&mut self, s: &str) -> Result<Written, CliError> {
+        let r = writeln!(self.out, "{s}").and_then(|()| {
+            if self.flush_each {
+                self.out.flush()
+            } else {
+                Ok(())
+            }
+        });
+        self.outcome(r)
+    }
+
+    /// Flushes what is buffered.
+    fn finish(&mut self) -> Result<Written, CliError> {
+        let r = self.out.flush();
+        self.outcome(r)
+    }
+
+    fn outcome(&mut self, r: std::io::Result<()>) -> Result<Written, CliError> {
+        match r {
+            Ok(()) => Ok(Written::Ok),
+            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(Written::Closed),
+            Err(e) => Err(fail_err(anyhow::anyhow!(
+                "cannot write the results to standard output: {e}"
+            ))),
+        }
+    }
+}
+
+/// True when `input` names a stream (stdin, a FIFO, a character device)
+/// rather than a regular file: results are then flushed one by one.
+fn is_stream(input: &str) -> bool {
+    input == "-" || std::fs::metadata(input).map_or(true, |m| !m.is_file())
+}
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -71,7 +135,8 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     let reader =
         scanio::open_input(&a.input).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.input)))?;
     let stdout = std::io::stdout();
-    let mut out = std::io::BufWriter::new(stdout.lock());
+    let mut out = Sink::new(stdout.lock(), is_stream(&a.input));
+    let mut closed = false;
     let mut scratch: Vec<u8> = Vec::new();
     let (mut n, mut failed, mut accepted, mut correct, mut false_acc) =
         (0usize, 0usize, 0usize, 0usize, 0usize);
@@ -81,13 +146,15 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     let mut errs: Vec<f64> = Vec::new();
     let mut times: Vec<f64> = Vec::new();
     if text {
-        let _ = writeln!(
-            out,
+        closed |= out.line(&format!(
             "{:<12} {:>4} {:>9} {:>9} {:>8} {:>6} {:>9} {:>8} {:>8} {:>8}",
             "id", "ok", "x_m", "y_m", "theta", "site", "E", "M", "M_thr", "time_ms"
-        );
+        ))? == Written::Closed;
     }
     for (k, item) in scanio::read_scans(reader, fmt, &opts).enumerate() {
+        if closed {
+            break;
+        }
         n += 1;
         let scan = match item {
             Ok(s) => s,
@@ -102,7 +169,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                 } else {
                     json!({"id": e.id, "line": e.line, "error": e.message}).to_string()
                 };
-                let _ = writeln!(out, "{line}");
+                closed = out.line(&line)? == Written::Closed;
                 continue;
             }
         };
@@ -207,8 +274,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                     }
                 }
                 if text {
-                    let _ = writeln!(
-                        out,
+                    closed = out.line(&format!(
                         "{:<12} {:>4} {:>9.3} {:>9.3} {:>8.4} {:>6} {:>9.1} {:>8.1} {:>8.1} {:>8.2}{}",
                         scan.id,
                         if l.accepted { "yes" } else { "no" },
@@ -221,7 +287,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                         l.vicinity_threshold,
                         time_us as f64 / 1000.0,
                         err.map(|(e, t)| format!("  err {:.3} m {:.2} deg", e, t.to_degrees())).unwrap_or_default()
-                    );
+                    ))? == Written::Closed;
                 } else {
                     let mut o = json!({
                         "id": scan.id, "accepted": l.accepted,
@@ -254,24 +320,29 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                             o["truth_refined_vicinity_ratio"] = json!(refined_fit);
                         }
                     }
-                    let _ = writeln!(out, "{o}");
+                    closed = out.line(&o.to_string())? == Written::Closed;
                 }
             }
             Err(e) => {
                 // A scan that cannot be localized is a result, not a failed line.
-                if text {
-                    let _ = writeln!(out, "{:<12} {:>4} not localized: {e}", scan.id, "no");
+                let line = if text {
+                    format!("{:<12} {:>4} not localized: {e}", scan.id, "no")
                 } else {
-                    let _ = writeln!(
-                        out,
-                        "{}",
-                        json!({"id": scan.id, "accepted": false, "reason": e.to_string(), "time_us": time_us})
-                    );
-                }
+                    json!({"id": scan.id, "accepted": false, "reason": e.to_string(), "time_us": time_us})
+                        .to_string()
+                };
+                closed = out.line(&line)? == Written::Closed;
             }
         }
     }
-    let _ = out.flush();
+    if !closed {
+        closed = out.finish()? == Written::Closed;
+    }
+    if closed {
+        ui.note(&format!(
+            "output closed by its reader after {n} scans; stopped there"
+        ));
+    }
     if !ui.quiet {
         times.sort_by(|a, b| a.total_cmp(b));
         let med_t = times.get(times.len() / 2).copied().unwrap_or(0.0);

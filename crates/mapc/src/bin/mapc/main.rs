@@ -23,7 +23,7 @@ mod util;
 #[derive(Parser, Debug)]
 #[command(name = "mapc", version, about, propagate_version = true)]
 struct Cli {
-    /// Worker threads (default: all cores). Output does not depend on it.
+    /// Worker threads, 1 to 256 (default: all cores). Output does not depend on it.
     #[arg(long, global = true, value_name = "N")]
     threads: Option<usize>,
     /// No progress bars or summaries on stderr.
@@ -58,11 +58,19 @@ enum Cmd {
     Stages(stages::Args),
 }
 
+/// The most worker threads `--threads` accepts: far above any machine's
+/// useful count, and a bound on what one option can make the process spawn.
+const MAX_THREADS: usize = 256;
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     if let Some(n) = cli.threads {
+        if !(1..=MAX_THREADS).contains(&n) {
+            eprintln!("error: --threads must be between 1 and {MAX_THREADS}, not {n}");
+            return ExitCode::from(2);
+        }
         if let Err(e) = rayon::ThreadPoolBuilder::new()
-            .num_threads(n.max(1))
+            .num_threads(n)
             .build_global()
         {
             eprintln!("error: cannot set up {n} threads: {e}");

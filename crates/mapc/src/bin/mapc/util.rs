@@ -89,6 +89,39 @@ impl Ui {
     }
 }
 
+/// The largest auxiliary text file a command reads whole (a baseline report
+/// for `eval --check`): 64 MiB, far above any report `mapc eval` writes
+/// (a few kB).
+pub const MAX_AUX_BYTES: u64 = 64 << 20;
+
+/// Reads a small text file given by `option`, at most [`MAX_AUX_BYTES`]:
+/// a device or an endless stream (`/dev/zero`) is refused once the bound is
+/// passed instead of filling memory.
+pub fn read_aux_text(path: &Path, option: &str) -> Result<String, CliError> {
+    use std::io::Read as _;
+    let bad = |why: String| input_err(anyhow::anyhow!("{option} {}: {why}", path.display()));
+    let f = std::fs::File::open(path).map_err(|e| bad(e.to_string()))?;
+    if f.metadata().map_err(|e| bad(e.to_string()))?.is_dir() {
+        return Err(bad("is a directory".into()));
+    }
+    let mut bytes = Vec::new();
+    f.take(MAX_AUX_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| bad(e.to_string()))?;
+    if bytes.len() as u64 > MAX_AUX_BYTES {
+        return Err(bad(format!(
+            "larger than {} MiB; not a file this option reads",
+            MAX_AUX_BYTES >> 20
+        )));
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        bad(format!(
+            "not UTF-8 text (byte {})",
+            e.utf8_error().valid_up_to()
+        ))
+    })
+}
+
 /// Opens a database by memory map and validates its structure.
 pub fn open_db(path: &Path) -> Result<refloc::RefDb<memmap2::Mmap>, CliError> {
     refloc::open_mmap(path).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", path.display())))

@@ -1,0 +1,203 @@
+//! The `mapc` binary against hostile surroundings rather than hostile
+//! files: output that cannot be written, a reader that goes away, a live
+//! stream of scans, auxiliary files that never end, option values that
+//! would make the process spawn without bound (issue 17).
+//!
+//! Registered as an integration test of the `mapc` package (see
+//! crates/mapc/Cargo.toml) so `CARGO_BIN_EXE_mapc` points at the binary.
+
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::sync::OnceLock;
+
+fn mapc() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_mapc"));
+    c.env("NO_COLOR", "1");
+    c
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// The number of simulated scans in the shared input file.
+const SCANS: usize = 40;
+
+/// The demo map compiled once for all tests, and `SCANS` simulated scans
+/// of it as JSON Lines: (database, scans file).
+/// The temporary directory lives as long as the static: the files stay for
+/// every test of the run.
+fn fixture() -> (&'static Path, &'static Path) {
+    static F: OnceLock<(tempfile::TempDir, PathBuf, PathBuf)> = OnceLock::new();
+    let f = F.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let map =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../maps/office-demo/office-demo.yaml");
+        let db = dir.path().join("demo.refdb");
+        let o = mapc()
+            .args(["build", map.to_str().unwrap(), "-o", db.to_str().unwrap()])
+            .args(["--fit-queries", "40", "-q"])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "build: {}", text(&o));
+        let bytes = std::fs::read(&db).unwrap();
+        let mut al = vec![0u32; bytes.len().div_ceil(4)];
+        zerocopy::IntoBytes::as_mut_bytes(&mut al[..])[..bytes.len()].copy_from_slice(&bytes);
+        let rdb =
+            refloc::RefDb::new(&zerocopy::IntoBytes::as_bytes(&al[..])[..bytes.len()]).unwrap();
+        let lidar = mapc::sim::Lidar::new(362, 2.0 * std::f32::consts::PI, 30.0);
+        let mut lines = String::new();
+        for (k, p) in mapc::eval::sample_poses(&rdb, SCANS, 0.4, 5)
+            .iter()
+            .enumerate()
+        {
+            let ranges = mapc::sim::virtual_scan(&rdb.grid(), &rdb.frame(), p, &lidar);
+            let data = mapc::scanio::ScanData::Ranges {
+                angle_min: lidar.angle_min,
+                angle_increment: lidar.angle_increment,
+                range_min: 0.0,
+                range_max: 30.0,
+                ranges: ranges
+                    .iter()
+                    .map(|r| if r.is_finite() { *r } else { f32::NAN })
+                    .collect(),
+            };
+            lines.push_str(&mapc::scanio::scan_to_json(&data, &format!("s{k}"), None));
+            lines.push('\n');
+        }
+        let scans = dir.path().join("scans.jsonl");
+        std::fs::write(&scans, lines).unwrap();
+        (dir, db, scans)
+    });
+    (&f.1, &f.2)
+}
+
+#[test]
+fn localize_into_a_full_device_fails_and_says_so() {
+    let (db, scans) = fixture();
+    let full = std::fs::OpenOptions::new().write(true).open("/dev/full");
+    let Ok(full) = full else {
+        eprintln!("skipped: /dev/full is not available on this system");
+        return;
+    };
+    let o = mapc()
+        .args(["localize", db.to_str().unwrap(), scans.to_str().unwrap()])
+        .stdout(full)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("cannot write the results to standard output"),
+        "{}",
+        text(&o)
+    );
+}
+
+#[test]
+fn localize_stops_when_its_reader_goes_away() {
+    let (db, scans) = fixture();
+    let mut child = mapc()
+        .args(["localize", db.to_str().unwrap(), scans.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let mut first = String::new();
+    out.read_line(&mut first).unwrap();
+    assert!(first.contains("\"id\":\"s0\""), "{first}");
+    // `| head -1`: the reader closes after one line. The results of all
+    // scans (80 candidates each) are far more than a pipe and the output
+    // buffer hold, so mapc must meet the closed pipe and stop.
+    drop(out);
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    let stopped: usize = err
+        .split("output closed by its reader after ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no note of the closed output: {err}"));
+    assert!(stopped < SCANS, "went on through every scan: {err}");
+}
+
+#[test]
+fn localize_from_a_stream_answers_each_scan_before_the_next_arrives() {
+    let (db, scans) = fixture();
+    let first_scan = std::fs::read_to_string(scans)
+        .unwrap()
+        .lines()
+        .next()
+        .unwrap()
+        .to_string();
+    let mut child = mapc()
+        .args(["localize", db.to_str().unwrap(), "-", "--no-candidates"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    writeln!(stdin, "{first_scan}").unwrap();
+    stdin.flush().unwrap();
+    // stdin stays open: the result must come out now. The reader runs on
+    // its own thread only so that a regression fails the test instead of
+    // hanging it (a bound on a deadlock, not a timing assertion).
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        let mut line = String::new();
+        let r = out.read_line(&mut line).map(|_| line);
+        let _ = tx.send(r);
+        out
+    });
+    let got = rx.recv_timeout(std::time::Duration::from_secs(300));
+    drop(stdin);
+    let status = child.wait().unwrap();
+    let line = got
+        .expect("no result while the stream stayed open: results are held back")
+        .unwrap();
+    let _ = reader.join();
+    let j: serde_json::Value = serde_json::from_str(&line).unwrap();
+    assert_eq!(j["id"], "s0");
+    assert!(status.success());
+}
+
+#[test]
+fn eval_check_refuses_an_endless_baseline_before_evaluating() {
+    if !Path::new("/dev/zero").exists() {
+        eprintln!("skipped: /dev/zero is not available on this system");
+        return;
+    }
+    let (db, _) = fixture();
+    let out = tempfile::tempdir().unwrap();
+    let o = mapc()
+        .args(["eval", db.to_str().unwrap(), "--check", "/dev/zero"])
+        .args(["--out", out.path().to_str().unwrap(), "--no-figures"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("--check /dev/zero"), "{}", text(&o));
+    assert!(text(&o).contains("larger than 64 MiB"), "{}", text(&o));
+    // Refused before the evaluation: no report was written.
+    assert!(!out.path().join("report.json").exists());
+}
+
+#[test]
+fn thread_counts_out_of_range_are_refused() {
+    for n in ["0", "100000"] {
+        let o = mapc().args(["--threads", n, "info", "x"]).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "--threads {n}: {}", text(&o));
+        assert!(
+            text(&o).contains("--threads must be between 1 and 256"),
+            "{}",
+            text(&o)
+        );
+    }
+}
