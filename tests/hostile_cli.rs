@@ -201,3 +201,59 @@ fn thread_counts_out_of_range_are_refused() {
         );
     }
 }
+
+#[test]
+fn a_build_that_would_not_read_back_keeps_the_old_database() {
+    let (db, _) = fixture();
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("good.refdb");
+    std::fs::copy(db, &good).unwrap();
+    let before = std::fs::read(&good).unwrap();
+    // An origin finite as f64 but not as f32: it loads, compiles, and only
+    // the database's reader refuses it.
+    let maps = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../maps/office-demo");
+    std::fs::copy(
+        maps.join("office-demo.pgm"),
+        dir.path().join("office-demo.pgm"),
+    )
+    .unwrap();
+    let yaml = std::fs::read_to_string(maps.join("office-demo.yaml")).unwrap();
+    let bad: String = yaml
+        .lines()
+        .map(|l| {
+            if l.starts_with("origin:") {
+                "origin: [1e300, 0.0, 0.0]".to_string()
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert_ne!(bad, yaml);
+    std::fs::write(dir.path().join("bad.yaml"), bad).unwrap();
+    let o = mapc()
+        .current_dir(dir.path())
+        .args([
+            "build",
+            "bad.yaml",
+            "-o",
+            "good.refdb",
+            "--fit-queries",
+            "10",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("does not read back"), "{}", text(&o));
+    assert_eq!(
+        std::fs::read(&good).unwrap(),
+        before,
+        "old database changed"
+    );
+    let mut names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["bad.yaml", "good.refdb", "office-demo.pgm"]);
+}

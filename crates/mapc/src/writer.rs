@@ -9,8 +9,32 @@ use std::path::Path;
 use refloc::format::{encode, SectionKind};
 
 /// Writes the sections as a `.refdb` at `path` atomically. Returns the file size.
+///
+/// Before the new file takes the name, it is read back from the temporary
+/// file with the reader `localize` uses (`refloc::open_mmap`: structure,
+/// parameters, sections) and its checksums are verified: a database that
+/// would not load (for example a map origin that is finite as f64 but not
+/// as f32) is an `InvalidData` error, and any old file under `path` stays
+/// byte-identical.
 pub fn write_refdb(path: &Path, sections: &[(SectionKind, &[u8])]) -> io::Result<u64> {
-    write_atomic(path, |w| encode(sections, |b| w.write_all(b)))
+    write_atomic_checked(
+        path,
+        |w| encode(sections, |b| w.write_all(b)),
+        |tmp| {
+            let bad = |e: &dyn std::fmt::Display| {
+                io::Error::new(
+                    io::ErrorKind::InvalidData,
+                    format!("the database built does not read back, so it was not written: {e}"),
+                )
+            };
+            let db = match refloc::open_mmap(tmp) {
+                Ok(db) => db,
+                Err(refloc::OpenError::Io(e)) => return Err(e),
+                Err(e) => return Err(bad(&e)),
+            };
+            db.verify().map_err(|e| bad(&e))
+        },
+    )
 }
 
 /// A new, empty temporary file beside `path` (same directory, so the
@@ -47,6 +71,18 @@ pub fn write_atomic<T>(
     path: &Path,
     fill: impl FnOnce(&mut dyn Write) -> io::Result<T>,
 ) -> io::Result<T> {
+    write_atomic_checked(path, fill, |_| Ok(()))
+}
+
+/// [`write_atomic`] with a last check: `check` gets the path of the
+/// complete, synced temporary file and can refuse it; only then is it
+/// renamed to `path`. On any error (of `fill` or `check`) the temporary
+/// file is removed and `path` is untouched.
+pub fn write_atomic_checked<T>(
+    path: &Path,
+    fill: impl FnOnce(&mut dyn Write) -> io::Result<T>,
+    check: impl FnOnce(&Path) -> io::Result<()>,
+) -> io::Result<T> {
     let mut tmp = temp_beside(path)?;
     let out = {
         let mut w = io::BufWriter::new(tmp.as_file_mut());
@@ -66,6 +102,7 @@ pub fn write_atomic<T>(
             .set_permissions(std::fs::Permissions::from_mode(mode))?;
     }
     tmp.as_file().sync_all()?;
+    check(tmp.path())?;
     tmp.persist(path).map_err(|e| e.error)?;
     Ok(out)
 }
@@ -104,6 +141,31 @@ mod tests {
         let e = check_writable(&dir.path().join("missing/a.refdb")).unwrap_err();
         assert_eq!(e.kind(), io::ErrorKind::NotFound, "{e}");
         assert!(check_writable(Path::new("/")).is_err());
+    }
+
+    #[test]
+    fn a_refused_file_leaves_the_old_one_and_no_temp() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a.refdb");
+        std::fs::write(&p, b"good").unwrap();
+        let mut seen = Vec::new();
+        let r = write_atomic_checked(
+            &p,
+            |w| w.write_all(b"complete but wrong"),
+            |tmp| {
+                seen = std::fs::read(tmp)?;
+                Err(io::Error::new(io::ErrorKind::InvalidData, "refused"))
+            },
+        );
+        assert_eq!(r.unwrap_err().kind(), io::ErrorKind::InvalidData);
+        assert_eq!(seen, b"complete but wrong", "check saw the whole file");
+        assert_eq!(std::fs::read(&p).unwrap(), b"good");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+        // An image that is no database is refused by write_refdb's check.
+        let e = write_refdb(&p, &[]).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::InvalidData, "{e}");
+        assert!(e.to_string().contains("does not read back"), "{e}");
+        assert_eq!(std::fs::read(&p).unwrap(), b"good");
     }
 
     #[test]
