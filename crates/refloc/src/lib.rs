@@ -69,7 +69,7 @@ pub use localize::{
 };
 #[cfg(feature = "mmap")]
 pub use mmap::{open_mmap, OpenError};
-pub use params::{Params, Selection, SensorModel};
+pub use params::{BadParam, Params, Selection, SensorModel};
 
 #[cfg(test)]
 mod tests;

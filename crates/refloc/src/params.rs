@@ -41,6 +41,38 @@ pub struct SensorModel {
     pub offset: crate::Pose2,
 }
 
+/// A parameter out of its valid range: the field (or group of fields, such
+/// as `range_max/range_min`) and the value found, in the field's own unit
+/// (for a group, the offending member; for a bin layout, the cell count).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BadParam {
+    /// The field's name as the params record spells it.
+    pub field: &'static str,
+    /// The value found (integers exactly, reals as stored).
+    pub value: f64,
+}
+
+impl BadParam {
+    const fn new(field: &'static str, value: f64) -> BadParam {
+        BadParam { field, value }
+    }
+}
+
+impl core::fmt::Display for BadParam {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{} (found {})", self.field, self.value)
+    }
+}
+
+/// The first value of `vs` that `ok` refuses, as f64 (NaN if none: the
+/// caller checked that one is bad).
+fn first_bad(vs: &[f32], ok: impl Fn(f32) -> bool) -> f64 {
+    vs.iter()
+        .copied()
+        .find(|v| !ok(*v))
+        .map_or(f64::NAN, |v| v as f64)
+}
+
 /// All runtime parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params {
@@ -204,89 +236,129 @@ impl Params {
         self.win_widths.iter().take_while(|w| **w > 0.0).count()
     }
 
-    /// Checks ranges; returns the name of the first bad field.
-    pub fn validate(&self) -> Result<(), &'static str> {
+    /// Checks ranges; returns the first bad field with the value found.
+    pub fn validate(&self) -> Result<(), BadParam> {
         let s = &self.sensor;
         let pos = |v: f32| v.is_finite() && v > 0.0;
         let fin = |v: f32| v.is_finite();
         if s.beams < 3 || s.beams > MAX_REF_BEAMS {
-            return Err("beams");
+            return Err(BadParam::new("beams", s.beams as f64));
         }
         if !fin(s.angle_min)
             || !pos(s.angle_increment)
             || s.angle_increment * s.beams as f32 > core::f32::consts::TAU * 1.0001
         {
-            return Err("angle_increment");
+            return Err(BadParam::new(
+                "angle_increment",
+                if fin(s.angle_min) {
+                    s.angle_increment as f64
+                } else {
+                    s.angle_min as f64
+                },
+            ));
         }
         if !pos(s.range_max)
             || s.range_min.is_nan()
             || s.range_min < 0.0
             || s.range_min >= s.range_max
         {
-            return Err("range_max/range_min");
+            return Err(BadParam::new(
+                "range_max/range_min",
+                if pos(s.range_max) {
+                    s.range_min as f64
+                } else {
+                    s.range_max as f64
+                },
+            ));
         }
         if !(fin(s.offset.x) && fin(s.offset.y) && fin(s.offset.theta)) {
-            return Err("sensor offset");
+            return Err(BadParam::new(
+                "sensor offset",
+                first_bad(&[s.offset.x, s.offset.y, s.offset.theta], fin),
+            ));
         }
         if !pos(self.resample_spacing) {
-            return Err("resample_spacing");
+            return Err(BadParam::new(
+                "resample_spacing",
+                self.resample_spacing as f64,
+            ));
         }
         if self.max_points < 8 || self.max_points > MAX_POINTS {
-            return Err("max_points");
+            return Err(BadParam::new("max_points", self.max_points as f64));
         }
         if !pos(self.jump_distance) {
-            return Err("jump_distance");
+            return Err(BadParam::new("jump_distance", self.jump_distance as f64));
         }
         if self.hist_rho_bins == 0
             || self.hist_theta_bins == 0
             || self.hist_rho_bins as u64 * self.hist_theta_bins as u64 > MAX_HIST_CELLS as u64
         {
-            return Err("histogram bins");
+            return Err(BadParam::new(
+                "histogram bins",
+                self.hist_rho_bins as f64 * self.hist_theta_bins as f64,
+            ));
         }
         if !pos(self.hist_rho_max) {
-            return Err("hist_rho_max");
+            return Err(BadParam::new("hist_rho_max", self.hist_rho_max as f64));
         }
         if self.nc_min == 0 || self.nc_max < self.nc_min || self.nc_max > MAX_CANDIDATES {
-            return Err("nc_min/nc_max");
+            return Err(BadParam::new(
+                "nc_min/nc_max",
+                if self.nc_min == 0 {
+                    0.0
+                } else {
+                    self.nc_max as f64
+                },
+            ));
         }
         if !(fin(self.nc_margin) && self.nc_margin >= 0.0) {
-            return Err("nc_margin");
+            return Err(BadParam::new("nc_margin", self.nc_margin as f64));
         }
         if !pos(self.desc_radius) {
-            return Err("desc_radius");
+            return Err(BadParam::new("desc_radius", self.desc_radius as f64));
         }
         if self.tentative_k == 0 || self.tentative_k > MAX_TENTATIVE_K {
-            return Err("tentative_k");
+            return Err(BadParam::new("tentative_k", self.tentative_k as f64));
         }
         if !pos(self.max_rho_dev) {
-            return Err("max_rho_dev");
+            return Err(BadParam::new("max_rho_dev", self.max_rho_dev as f64));
         }
         if !self.w.iter().all(|v| v.is_finite()) {
-            return Err("w");
+            return Err(BadParam::new("w", first_bad(&self.w, fin)));
         }
         if self.power_iters == 0 || self.power_iters > 1000 {
-            return Err("power_iters");
+            return Err(BadParam::new("power_iters", self.power_iters as f64));
         }
         if !(self.binarize_frac >= 0.0 && self.binarize_frac < 1.0) {
-            return Err("binarize_frac");
+            return Err(BadParam::new("binarize_frac", self.binarize_frac as f64));
         }
         if self.ransac_iters == 0 || self.ransac_iters > 100_000 {
-            return Err("ransac_iters");
+            return Err(BadParam::new("ransac_iters", self.ransac_iters as f64));
         }
         if !pos(self.ransac_threshold) {
-            return Err("ransac_threshold");
+            return Err(BadParam::new(
+                "ransac_threshold",
+                self.ransac_threshold as f64,
+            ));
         }
         if self.min_inliers < 2 {
-            return Err("min_inliers");
+            return Err(BadParam::new("min_inliers", self.min_inliers as f64));
         }
         if self.refine_iters > 1000 || !pos(self.refine_max_dist) {
-            return Err("refine");
+            return Err(BadParam::new(
+                "refine",
+                if self.refine_iters > 1000 {
+                    self.refine_iters as f64
+                } else {
+                    self.refine_max_dist as f64
+                },
+            ));
         }
         if !pos(self.sigma_d) {
-            return Err("sigma_d");
+            return Err(BadParam::new("sigma_d", self.sigma_d as f64));
         }
         if !(self.accept_ratio >= 0.0 && self.accept_ratio <= 1.0) {
-            return Err("accept_ratio");
+            return Err(BadParam::new("accept_ratio", self.accept_ratio as f64));
         }
         let two_pi = 2.0 * core::f32::consts::PI;
         if !self
@@ -294,12 +366,17 @@ impl Params {
             .iter()
             .all(|w| *w == 0.0 || (w.is_finite() && *w > 0.0 && *w < two_pi))
         {
-            return Err("win_widths");
+            return Err(BadParam::new(
+                "win_widths",
+                first_bad(&self.win_widths, |w| {
+                    w == 0.0 || (w.is_finite() && w > 0.0 && w < two_pi)
+                }),
+            ));
         }
         if self.win_widths[0] == 0.0 && self.win_widths[1] != 0.0
             || (self.win_count() == 2 && self.win_widths[1] <= self.win_widths[0])
         {
-            return Err("win_widths order");
+            return Err(BadParam::new("win_widths order", self.win_widths[1] as f64));
         }
         if self.win_count() > 0
             && (self.win_headings == 0
@@ -308,40 +385,53 @@ impl Params {
                 || self.win_theta_bins == 0
                 || self.win_rho_bins as u64 * self.win_theta_bins as u64 > MAX_HIST_CELLS as u64)
         {
-            return Err("window histogram layout");
+            return Err(BadParam::new(
+                "window histogram layout",
+                if self.win_headings == 0 || self.win_headings > 64 {
+                    self.win_headings as f64
+                } else {
+                    self.win_rho_bins as f64 * self.win_theta_bins as f64
+                },
+            ));
         }
         if self.affinity_cap < 64 || self.affinity_cap > 1 << 20 {
-            return Err("affinity_cap");
+            return Err(BadParam::new("affinity_cap", self.affinity_cap as f64));
         }
         if !(self.ambiguity_ratio >= 0.0 && self.ambiguity_ratio <= 1.0) {
-            return Err("ambiguity_ratio");
+            return Err(BadParam::new(
+                "ambiguity_ratio",
+                self.ambiguity_ratio as f64,
+            ));
         }
         if !(self.through_max >= 0.0 && self.through_max <= 1.0) {
-            return Err("through_max");
+            return Err(BadParam::new("through_max", self.through_max as f64));
         }
         if !(self.through_excess.is_finite() && self.through_excess >= 0.0) {
-            return Err("through_excess");
+            return Err(BadParam::new("through_excess", self.through_excess as f64));
         }
         if !(self.short_weight >= 0.0 && self.short_weight <= 1.0) {
-            return Err("short_weight");
+            return Err(BadParam::new("short_weight", self.short_weight as f64));
         }
         if self.through_run > 64 {
-            return Err("through_run");
+            return Err(BadParam::new("through_run", self.through_run as f64));
         }
         if !(self.occlusion_fit >= 0.0 && self.occlusion_fit <= 1.0) {
-            return Err("occlusion_fit");
+            return Err(BadParam::new("occlusion_fit", self.occlusion_fit as f64));
         }
         if !(self.early_accept >= 0.0 && self.early_accept <= 1.0) {
-            return Err("early_accept");
+            return Err(BadParam::new("early_accept", self.early_accept as f64));
         }
         if self.min_valid_points < 3 {
-            return Err("min_valid_points");
+            return Err(BadParam::new(
+                "min_valid_points",
+                self.min_valid_points as f64,
+            ));
         }
         Ok(())
     }
 
     /// Reads a record (no validation; call [`Params::validate`]).
-    pub fn from_record(r: &ParamsRecord) -> Result<Params, &'static str> {
+    pub fn from_record(r: &ParamsRecord) -> Result<Params, BadParam> {
         Ok(Params {
             sensor: SensorModel {
                 beams: r.beams.get(),
@@ -382,7 +472,7 @@ impl Params {
             selection: match r.selection.get() {
                 0 => Selection::MatchScore,
                 1 => Selection::Vicinity,
-                _ => return Err("selection"),
+                v => return Err(BadParam::new("selection", v as f64)),
             },
             early_accept: r.early_accept.get(),
             win_widths: [r.win_widths[0].get(), r.win_widths[1].get()],

@@ -63,6 +63,13 @@ pub struct DbError {
     pub expected: u64,
     /// Found value, when meaningful.
     pub found: u64,
+    /// For [`DbErrorKind::Value`]: the value found, bits of an f64 (integers
+    /// exactly, reals as stored); see [`DbError::value`].
+    value_bits: Option<u64>,
+    /// For [`DbErrorKind::Alignment`]: the container's address is off (the
+    /// file is fine; `found` is the address modulo `expected`), not the
+    /// section's offset in the file.
+    in_memory: bool,
 }
 
 impl DbError {
@@ -72,7 +79,43 @@ impl DbError {
             context,
             expected,
             found,
+            value_bits: None,
+            in_memory: false,
         }
+    }
+
+    /// A section whose bytes lie at an address that is not a multiple of
+    /// `align` in memory (the container is misaligned, not the file).
+    fn misaligned_in_memory(context: &'static str, align: u64, bytes: &[u8]) -> Self {
+        DbError {
+            in_memory: true,
+            ..DbError::new(
+                DbErrorKind::Alignment,
+                context,
+                align,
+                bytes.as_ptr() as usize as u64 % align,
+            )
+        }
+    }
+
+    /// A value out of its valid range in `context`, with the value found.
+    fn value(context: &'static str, value: f64) -> Self {
+        DbError {
+            value_bits: Some(value.to_bits()),
+            ..DbError::new(DbErrorKind::Value, context, 0, 0)
+        }
+    }
+
+    /// A value out of its valid range where no single number says what is
+    /// wrong (an inconsistent layout): the message names the context only.
+    const fn invalid(context: &'static str) -> Self {
+        DbError::new(DbErrorKind::Value, context, 0, 0)
+    }
+
+    /// For a [`DbErrorKind::Value`] error: the offending value, in the
+    /// field's own unit (metres, radians, a count), when one number says it.
+    pub fn found_value(&self) -> Option<f64> {
+        self.value_bits.map(f64::from_bits)
     }
 }
 
@@ -92,11 +135,18 @@ impl fmt::Display for DbError {
             SectionChecksum => write!(f, "checksum mismatch in section '{c}': stored {e:#010x}, computed {g:#010x}"),
             Table => write!(f, "malformed section table: {c} (value {g})"),
             OutOfBounds => write!(f, "section '{c}' ends at byte {g}, past the end of the file ({e} bytes)"),
+            Alignment if self.in_memory => write!(
+                f,
+                "section '{c}' lies at a memory address {g} bytes past a multiple of {e}: the buffer holding the database is misaligned (the file itself is fine)"
+            ),
             Alignment => write!(f, "section '{c}' starts at byte {g}, not a multiple of {e}"),
             Overlap => write!(f, "section '{c}' overlaps another section at byte {g}"),
             Missing => write!(f, "required section '{c}' is missing"),
             Size => write!(f, "section '{c}' has {g} bytes, expected {e}"),
-            Value => write!(f, "invalid value in {c} (found {g})"),
+            Value => match self.found_value() {
+                Some(v) => write!(f, "invalid value in {c} (found {v})"),
+                None => write!(f, "invalid value in {c}"),
+            },
             HostEndian => write!(f, "this build runs on a big-endian target; .refdb arrays are little-endian"),
         }
     }
@@ -450,24 +500,25 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
         .map_err(|_| DbError::new(Size, "meta", 0, 0))?;
     let pr = ParamsRecord::read_from_bytes(sec(SectionKind::Params))
         .map_err(|_| DbError::new(Size, "params", 0, 0))?;
-    let params = Params::from_record(&pr).map_err(|f| DbError::new(Value, f, 0, 0))?;
-    params
-        .validate()
-        .map_err(|f| DbError::new(Value, f, 0, 0))?;
+    let bad_param = |b: crate::BadParam| DbError::value(b.field, b.value);
+    let params = Params::from_record(&pr).map_err(bad_param)?;
+    params.validate().map_err(bad_param)?;
 
     let (w, h) = (meta.width.get() as usize, meta.height.get() as usize);
     if w == 0 || h == 0 {
-        return Err(DbError::new(Value, "grid size", 1, 0));
+        return Err(DbError::value("grid size", w.min(h) as f64));
     }
     let res = meta.resolution.get();
     if !(res.is_finite() && res > 0.0) {
-        return Err(DbError::new(Value, "resolution", 0, res.to_bits() as u64));
+        return Err(DbError::value("resolution", res as f64));
     }
-    if !(meta.origin_x.get().is_finite()
-        && meta.origin_y.get().is_finite()
-        && meta.origin_yaw.get().is_finite())
-    {
-        return Err(DbError::new(Value, "origin", 0, 0));
+    let origin = [
+        meta.origin_x.get(),
+        meta.origin_y.get(),
+        meta.origin_yaw.get(),
+    ];
+    if let Some(v) = origin.iter().find(|v| !v.is_finite()) {
+        return Err(DbError::value("origin", *v as f64));
     }
     // Sizes computed in u64/u128 so absurd dimensions cannot overflow; the
     // comparison with the real section length bounds everything.
@@ -479,7 +530,7 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
     exact(SectionKind::Dist, cells.min(usize::MAX as u64) as usize)?;
     let n_sites = meta.site_count.get() as u64;
     if n_sites == 0 {
-        return Err(DbError::new(Value, "site count", 1, 0));
+        return Err(DbError::value("site count", 0.0));
     }
     let sz = |n: u64, each: u64| (n as u128 * each as u128).min(usize::MAX as u128) as usize;
     exact(
@@ -507,9 +558,12 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
         ));
     }
     let nb = <[u32]>::ref_from_bytes(sec(SectionKind::Neighbors))
-        .map_err(|_| DbError::new(Alignment, "neighbors", 4, 0))?;
-    if nb.iter().any(|&v| v as u64 >= n_sites) {
-        return Err(DbError::new(Value, "neighbor index", n_sites, 0));
+        .map_err(|_| DbError::misaligned_in_memory("neighbors", 4, sec(SectionKind::Neighbors)))?;
+    if let Some(v) = nb.iter().find(|&&v| v as u64 >= n_sites) {
+        return Err(DbError {
+            expected: n_sites,
+            ..DbError::value("neighbor index", *v as f64)
+        });
     }
     let sites = <[SiteRecord]>::ref_from_bytes(sec(SectionKind::Sites))
         .map_err(|_| DbError::new(Size, "sites", 0, 0))?;
@@ -523,8 +577,9 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
                 a + n,
             ));
         }
-        if !(s.x.get().is_finite() && s.y.get().is_finite() && s.clearance.get().is_finite()) {
-            return Err(DbError::new(Value, "site position", 0, 0));
+        let coords = [s.x.get(), s.y.get(), s.clearance.get()];
+        if let Some(v) = coords.iter().find(|v| !v.is_finite()) {
+            return Err(DbError::value("site position", *v as f64));
         }
     }
     // Arrays read in place must be aligned in memory too (the container may
@@ -539,16 +594,11 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
     ] {
         let s = sec(k);
         if <[u32]>::ref_from_bytes(s).is_err() {
-            return Err(DbError::new(
-                Alignment,
-                k.name(),
-                4,
-                s.as_ptr() as usize as u64 % 4,
-            ));
+            return Err(DbError::misaligned_in_memory(k.name(), 4, s));
         }
     }
     crate::index::validate(sec(SectionKind::Index), &params, n_sites as usize)
-        .map_err(|f| DbError::new(Value, f, 0, 0))?;
+        .map_err(DbError::invalid)?;
     Ok((sections, crcs, meta, params))
 }
 

@@ -224,6 +224,13 @@ fn aligned_and_misaligned_buffers() {
             .err()
             .expect("misaligned arrays are rejected");
         assert_eq!(e.kind, DbErrorKind::Alignment, "offset {off}: {e}");
+        // The file is fine: the message blames the buffer, with its offset.
+        assert!(
+            e.to_string()
+                .contains("buffer holding the database is misaligned"),
+            "{e}"
+        );
+        assert_eq!(e.found, (off % 4) as u64, "{e}");
         assert!(
             ["grid", "scans", "hists", "neighbors"].contains(&e.context),
             "{e:?}"
@@ -738,13 +745,48 @@ fn meta_values() {
     use DbErrorKind::*;
     for res in [0.0f32, -0.05, f32::NAN, f32::INFINITY] {
         let b = reencode(|s| edit_meta(s, |m| m.resolution = F32::new(res)));
-        expect(&b, Value, Some("resolution"));
+        let e = expect(&b, Value, Some("resolution"));
+        // The message prints the value found, not its bits.
+        let found = e
+            .found_value()
+            .expect("a resolution error carries its value");
+        assert!(found.to_bits() == (res as f64).to_bits(), "{e}");
+        assert!(
+            e.to_string().contains(&format!("found {}", res as f64)),
+            "{e}"
+        );
     }
     for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
         let b = reencode(|s| edit_meta(s, |m| m.origin_yaw = F32::new(bad)));
-        expect(&b, Value, Some("origin"));
+        let e = expect(&b, Value, Some("origin"));
+        assert!(
+            e.to_string().contains(&format!("found {}", bad as f64)),
+            "{e}"
+        );
         let b = reencode(|s| edit_meta(s, |m| m.origin_x = F32::new(bad)));
         expect(&b, Value, Some("origin"));
+    }
+}
+
+#[test]
+fn parameter_errors_print_the_value_found() {
+    use DbErrorKind::*;
+    type Edit = fn(&mut ParamsRecord);
+    let cases: [(Edit, &str, &str); 5] = [
+        (|p| p.beams = U32::new(5000), "beams", "found 5000"),
+        (|p| p.sigma_d = F32::new(-0.25), "sigma_d", "found -0.25"),
+        (
+            |p| p.range_max = F32::new(-1.0),
+            "range_max/range_min",
+            "found -1",
+        ),
+        (|p| p.w[2] = F32::new(f32::INFINITY), "w", "found inf"),
+        (|p| p.selection = U32::new(7), "selection", "found 7"),
+    ];
+    for (edit, ctx, text) in cases {
+        let b = reencode(|s| edit_params(s, edit));
+        let e = expect(&b, Value, Some(ctx));
+        assert!(e.to_string().contains(text), "{ctx}: {e}");
     }
 }
 
@@ -891,24 +933,14 @@ fn every_error_kind_has_a_message() {
     ];
     for kind in kinds {
         for k in SectionKind::ALL {
-            let e = DbError {
-                kind,
-                context: k.name(),
-                expected: 16,
-                found: 3,
-            };
+            let e = DbError::new(kind, k.name(), 16, 3);
             check_message(&e);
             let msg = e.to_string();
             assert!(msg.len() > 10, "{kind:?}: {msg}");
         }
     }
     // Errors are usable as `dyn Error`.
-    let e: &dyn core::error::Error = &DbError {
-        kind: Size,
-        context: "grid",
-        expected: 1,
-        found: 2,
-    };
+    let e: &dyn core::error::Error = &DbError::new(Size, "grid", 1, 2);
     assert!(e.to_string().contains("grid"));
 }
 
