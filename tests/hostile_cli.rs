@@ -257,3 +257,37 @@ fn a_build_that_would_not_read_back_keeps_the_old_database() {
     names.sort();
     assert_eq!(names, ["bad.yaml", "good.refdb", "office-demo.pgm"]);
 }
+
+#[test]
+fn an_origin_or_resolution_that_contradicts_the_yaml_is_refused_not_ignored() {
+    let yaml =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../maps/office-demo/office-demo.yaml");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.refdb");
+    for (flag, value) in [("--origin", "5,5,0"), ("--resolution", "0.5")] {
+        let o = mapc()
+            .args(["build", yaml.to_str().unwrap(), "-o", out.to_str().unwrap()])
+            .args([flag, value])
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{flag}: {}", text(&o));
+        let field = flag.trim_start_matches("--");
+        assert!(text(&o).contains(field), "{flag}: {}", text(&o));
+        assert!(!out.exists(), "{flag}: a database was written");
+    }
+}
+
+#[test]
+fn synth_refuses_a_map_too_small_to_build() {
+    let dir = tempfile::tempdir().unwrap();
+    for (w, h) in [("0", "100"), ("100", "0"), ("8", "8")] {
+        let o = mapc()
+            .current_dir(dir.path())
+            .args(["synth", "--width", w, "--height", h, "-o", "s"])
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{w} x {h}: {}", text(&o));
+        assert!(text(&o).contains("at least 16 cells"), "{}", text(&o));
+    }
+    assert!(!dir.path().join("s").exists(), "files were written");
+}

@@ -451,6 +451,43 @@ pub fn load_yaml(path: &Path) -> Result<MapSource, MapError> {
     })
 }
 
+/// Checks a `--resolution` and `--origin` given on the command line against
+/// the YAML that describes the map (`yaml`, already loaded as `src`): equal
+/// values are fine, a different one is a [`MapError::Conflict`] naming both,
+/// so a value the user gave is never silently ignored.
+pub fn check_given(
+    src: &MapSource,
+    yaml: &Path,
+    resolution: Option<f64>,
+    origin: Option<[f64; 3]>,
+) -> Result<(), MapError> {
+    if let Some(r) = resolution {
+        if (r - src.grid.resolution).abs() > 1e-12 * r.abs().max(1.0) || !r.is_finite() {
+            return Err(MapError::Conflict {
+                path: yaml.to_path_buf(),
+                field: "resolution",
+                yaml_value: src.grid.resolution.to_string(),
+                given: r.to_string(),
+            });
+        }
+    }
+    if let Some(o) = origin {
+        let differs = o
+            .iter()
+            .zip(src.grid.origin.iter())
+            .any(|(a, b)| !a.is_finite() || (a - b).abs() > 1e-9);
+        if differs {
+            return Err(MapError::Conflict {
+                path: yaml.to_path_buf(),
+                field: "origin",
+                yaml_value: format!("{:?}", src.grid.origin),
+                given: format!("{o:?}"),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Loads a map given by its image, as `mapc build lab.pgm` does.
 ///
 /// When `lab.yaml` exists beside `lab.pgm` it is loaded with [`load_yaml`];
@@ -474,30 +511,7 @@ pub fn load_image(
                 image: path.to_path_buf(),
             });
         }
-        if let Some(r) = resolution {
-            if (r - src.grid.resolution).abs() > 1e-12 * r.abs().max(1.0) || !r.is_finite() {
-                return Err(MapError::Conflict {
-                    path: yaml,
-                    field: "resolution",
-                    yaml_value: src.grid.resolution.to_string(),
-                    given: r.to_string(),
-                });
-            }
-        }
-        if let Some(o) = origin {
-            let differs = o
-                .iter()
-                .zip(src.grid.origin.iter())
-                .any(|(a, b)| !a.is_finite() || (a - b).abs() > 1e-9);
-            if differs {
-                return Err(MapError::Conflict {
-                    path: yaml,
-                    field: "origin",
-                    yaml_value: format!("{:?}", src.grid.origin),
-                    given: format!("{o:?}"),
-                });
-            }
-        }
+        check_given(&src, &yaml, resolution, origin)?;
         return Ok(src);
     }
     let Some(resolution) = resolution else {

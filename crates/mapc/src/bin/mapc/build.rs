@@ -17,11 +17,13 @@ pub struct Args {
     /// Output database [default: <map stem>.refdb in the current directory].
     #[arg(short, long, value_name = "OUT.refdb")]
     pub output: Option<PathBuf>,
-    /// Metres per cell, for an image without a YAML beside it.
+    /// Metres per cell, for an image without a YAML beside it (with a YAML
+    /// it must agree with the YAML's).
     #[arg(long, value_name = "M")]
     pub resolution: Option<f64>,
     /// Map-frame pose of the image's lower-left corner, for an image without
-    /// a YAML: "x,y,yaw" (m, m, rad).
+    /// a YAML: "x,y,yaw" (m, m, rad) (with a YAML it must agree with the
+    /// YAML's).
     #[arg(long, value_name = "X,Y,YAW", value_parser = parse_triple, allow_hyphen_values = true)]
     pub origin: Option<[f64; 3]>,
     /// Print every step's wall-clock time, process CPU time and the peak
@@ -182,7 +184,10 @@ pub fn load_map(
         Some("yaml") | Some("yml")
     );
     if is_yaml {
-        mapfile::load_yaml(map)
+        // The YAML gives both; a value given as well must agree with it.
+        let src = mapfile::load_yaml(map)?;
+        mapfile::check_given(&src, map, resolution, origin)?;
+        Ok(src)
     } else {
         mapfile::load_image(map, resolution, origin)
     }
