@@ -291,3 +291,54 @@ fn synth_refuses_a_map_too_small_to_build() {
     }
     assert!(!dir.path().join("s").exists(), "files were written");
 }
+
+#[test]
+fn a_damaged_database_is_refused_unless_no_verify() {
+    let (db, scans) = fixture();
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.refdb");
+    let mut bytes = std::fs::read(db).unwrap();
+    // One bit flipped in the middle of the file: inside a section's
+    // payload (the grid, distance map and scans fill it), so the structure
+    // still reads and only that section's CRC is wrong.
+    let k = bytes.len() / 2;
+    bytes[k] ^= 0x10;
+    std::fs::write(&bad, &bytes).unwrap();
+    let bad_s = bad.to_str().unwrap();
+    for args in [
+        vec!["info", bad_s],
+        vec!["localize", bad_s, scans.to_str().unwrap()],
+    ] {
+        let o = mapc().args(&args).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", text(&o));
+        assert!(text(&o).contains("checksum"), "{args:?}: {}", text(&o));
+        assert!(text(&o).contains("--no-verify"), "{args:?}: {}", text(&o));
+    }
+    // `mapc verify` reports it as a failed check (exit 1), not bad usage.
+    let o = mapc().args(["verify", bad_s]).output().unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    // The user can still choose to read it.
+    let o = mapc()
+        .args(["info", bad_s, "--no-verify"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+}
+
+#[test]
+fn a_fifo_as_the_database_is_refused_without_blocking() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("db.fifo");
+    let made = Command::new("mkfifo").arg(&fifo).status();
+    if !made.is_ok_and(|s| s.success()) {
+        eprintln!("skipped: mkfifo is not available");
+        return;
+    }
+    // Opening a FIFO for reading blocks until a writer comes: this returns
+    // only because mapc refuses it before opening.
+    for cmd in ["info", "verify"] {
+        let o = mapc().args([cmd, fifo.to_str().unwrap()]).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{cmd}: {}", text(&o));
+        assert!(text(&o).contains("not a regular file"), "{}", text(&o));
+    }
+}

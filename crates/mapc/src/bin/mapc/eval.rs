@@ -12,7 +12,7 @@ use mapc::rng::Rng;
 use serde_json::{json, Value};
 
 use crate::util::outln;
-use crate::util::{fail_err, input_err, open_db, read_aux_text, CliResult, Ui};
+use crate::util::{fail_err, input_err, open_db, read_aux_text, Check, CliResult, Ui};
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct Args {
@@ -168,7 +168,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
 
 /// Runs the requested experiments and returns the report.
 pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
-    let db = open_db(&a.db)?;
+    let db = open_db(&a.db, Check::Full)?;
     let fov = a.fov.to_radians();
     if !(fov > 0.0 && fov <= 2.0 * std::f32::consts::PI + 1e-3) || a.beams < 3 {
         return Err(input_err(anyhow::anyhow!(

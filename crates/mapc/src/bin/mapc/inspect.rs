@@ -8,7 +8,7 @@ use refloc::RefDb;
 use serde_json::{json, Value};
 
 use crate::util::outln;
-use crate::util::{fail_err, open_db, CliResult};
+use crate::util::{fail_err, open_db, Check, CliResult};
 
 #[derive(clap::Args, Debug)]
 pub struct InfoArgs {
@@ -110,7 +110,7 @@ fn info_json<D: AsRef<[u8]>>(db: &RefDb<D>) -> Value {
 }
 
 pub fn info(a: InfoArgs) -> CliResult {
-    let db = open_db(&a.db)?;
+    let db = open_db(&a.db, Check::Full)?;
     let j = info_json(&db);
     if a.json {
         outln!("{}", serde_json::to_string_pretty(&j).unwrap_or_default());
@@ -172,7 +172,7 @@ pub fn info(a: InfoArgs) -> CliResult {
 }
 
 pub fn verify(a: VerifyArgs) -> CliResult {
-    let db = open_db(&a.db)?;
+    let db = open_db(&a.db, Check::Structure)?;
     db.verify()
         .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.db.display())))?;
     outln!(
@@ -185,8 +185,8 @@ pub fn verify(a: VerifyArgs) -> CliResult {
 }
 
 pub fn diff(a: DiffArgs) -> CliResult {
-    let da = open_db(&a.a)?;
-    let db = open_db(&a.b)?;
+    let da = open_db(&a.a, Check::Full)?;
+    let db = open_db(&a.b, Check::Full)?;
     let (ja, jb) = (info_json(&da), info_json(&db));
     let mut changes: Vec<Value> = Vec::new();
     // Parameters and grid.

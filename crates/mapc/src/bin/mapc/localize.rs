@@ -10,7 +10,7 @@ use mapc::scanio::{self, InputFormat, ReadOptions, ScanData};
 use refloc::{localize, scratch_size, RangeScan, Scan};
 use serde_json::json;
 
-use crate::util::{fail_err, input_err, open_db, CliError, CliResult, Ui};
+use crate::util::{fail_err, input_err, open_db, Check, CliError, CliResult, Ui};
 
 /// Where the results go: standard output, every write checked.
 ///
@@ -106,7 +106,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
-    let db = open_db(&a.db)?;
+    let db = open_db(&a.db, Check::Full)?;
     let fmt: InputFormat = a
         .input_format
         .parse()

@@ -26,6 +26,10 @@ struct Cli {
     /// Worker threads, 1 to 256 (default: all cores). Output does not depend on it.
     #[arg(long, global = true, value_name = "N")]
     threads: Option<usize>,
+    /// Skip the CRC check of the database that info, localize, eval and
+    /// diff make when they open it (the structure is always checked).
+    #[arg(long, global = true)]
+    no_verify: bool,
     /// No progress bars or summaries on stderr.
     #[arg(long, short, global = true)]
     quiet: bool,
@@ -77,6 +81,7 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     }
+    util::set_verify_crcs(!cli.no_verify);
     let ui = util::Ui::new(cli.quiet);
     let r = match cli.cmd {
         Cmd::Build(a) => build::run(a, &ui),

@@ -12,6 +12,7 @@ pub(crate) use outln;
 
 use std::io::IsTerminal;
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -122,9 +123,87 @@ pub fn read_aux_text(path: &Path, option: &str) -> Result<String, CliError> {
     })
 }
 
-/// Opens a database by memory map and validates its structure.
-pub fn open_db(path: &Path) -> Result<refloc::RefDb<memmap2::Mmap>, CliError> {
-    refloc::open_mmap(path).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", path.display())))
+/// Databases up to this size are read into memory instead of mapped:
+/// 256 MiB. A file truncated or rewritten in place by another process
+/// while a mapped database is in use can kill the process with SIGBUS; a
+/// copy in memory cannot be changed under it. (`mapc build` replaces files
+/// by rename, which leaves a running reader's mapping intact either way.)
+/// Larger databases are mapped (`refloc::open_mmap`, its contract applies).
+pub const MAX_READ_DB_BYTES: u64 = 256 << 20;
+
+/// A database's bytes: a 4-byte aligned copy in memory, or a mapping.
+pub enum DbBytes {
+    /// Read into memory; `len` bytes of `words` are the file.
+    Owned { words: Vec<u32>, len: usize },
+    /// Mapped (larger than [`MAX_READ_DB_BYTES`]).
+    Mapped(memmap2::Mmap),
+}
+
+impl AsRef<[u8]> for DbBytes {
+    fn as_ref(&self) -> &[u8] {
+        match self {
+            DbBytes::Owned { words, len } => &zerocopy::IntoBytes::as_bytes(&words[..])[..*len],
+            DbBytes::Mapped(m) => m,
+        }
+    }
+}
+
+/// Whether commands check the database's section CRCs when they open it
+/// (the default; `--no-verify` turns it off for the whole run).
+static VERIFY_CRCS: AtomicBool = AtomicBool::new(true);
+
+/// Sets whether [`open_db`] checks CRCs (from `--no-verify`).
+pub fn set_verify_crcs(on: bool) {
+    VERIFY_CRCS.store(on, Ordering::Relaxed);
+}
+
+/// How much [`open_db`] checks.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub enum Check {
+    /// Structure, and the CRCs unless `--no-verify` was given.
+    Full,
+    /// Structure only (for `mapc verify`, which reports the CRCs itself).
+    Structure,
+}
+
+/// Opens a database and validates its structure (and, by default, its
+/// CRCs): only a regular file is opened (a FIFO or a device would block or
+/// never end); up to [`MAX_READ_DB_BYTES`] it is read into memory, above
+/// that it is mapped.
+pub fn open_db(path: &Path, check: Check) -> Result<refloc::RefDb<DbBytes>, CliError> {
+    use std::io::Read as _;
+    let bad = |why: String| input_err(anyhow::anyhow!("{}: {why}", path.display()));
+    let meta = std::fs::metadata(path).map_err(|e| bad(e.to_string()))?;
+    if !meta.is_file() {
+        return Err(bad(
+            "not a regular file (a directory, FIFO or device cannot hold a database)".into(),
+        ));
+    }
+    let bytes = if meta.len() <= MAX_READ_DB_BYTES {
+        let len = meta.len() as usize;
+        let mut words = vec![0u32; len.div_ceil(4)];
+        let mut f = std::fs::File::open(path).map_err(|e| bad(e.to_string()))?;
+        f.read_exact(&mut zerocopy::IntoBytes::as_mut_bytes(&mut words[..])[..len])
+            .map_err(|e| bad(format!("cannot read {len} bytes: {e}")))?;
+        DbBytes::Owned { words, len }
+    } else {
+        let f = std::fs::File::open(path).map_err(|e| bad(e.to_string()))?;
+        // SAFETY: the file is opened read-only and the mapping is only read;
+        // a file changed in place by another process while mapped is
+        // outside what this program can prevent (see MAX_READ_DB_BYTES).
+        #[allow(unsafe_code)]
+        let m = unsafe { memmap2::Mmap::map(&f) }.map_err(|e| bad(e.to_string()))?;
+        DbBytes::Mapped(m)
+    };
+    let db = refloc::RefDb::new(bytes).map_err(|e| bad(e.to_string()))?;
+    if check == Check::Full && VERIFY_CRCS.load(Ordering::Relaxed) {
+        db.verify().map_err(|e| {
+            bad(format!(
+                "{e} (the database is damaged; `mapc verify` checks it, --no-verify skips the check)"
+            ))
+        })?;
+    }
+    Ok(db)
 }
 
 /// Parses "x,y,yaw" (metres, metres, radians).
