@@ -342,3 +342,51 @@ fn a_fifo_as_the_database_is_refused_without_blocking() {
         assert!(text(&o).contains("not a regular file"), "{}", text(&o));
     }
 }
+
+#[test]
+fn build_refuses_an_output_that_is_an_input_or_a_special_file() {
+    let maps = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../maps/office-demo");
+    let dir = tempfile::tempdir().unwrap();
+    for f in ["office-demo.pgm", "office-demo.yaml"] {
+        std::fs::copy(maps.join(f), dir.path().join(f)).unwrap();
+    }
+    let before: Vec<Vec<u8>> = ["office-demo.pgm", "office-demo.yaml"]
+        .iter()
+        .map(|f| std::fs::read(dir.path().join(f)).unwrap())
+        .collect();
+    let mut outs = vec![
+        ("office-demo.yaml", "same file as the input"),
+        ("office-demo.pgm", "same file as the input"),
+        (".", "not a regular file"),
+    ];
+    // A FIFO made here stands for devices like /dev/null or /dev/stdout (a
+    // regression must not be able to replace a system file).
+    let fifo_made = Command::new("mkfifo")
+        .arg(dir.path().join("out.fifo"))
+        .status()
+        .is_ok_and(|s| s.success());
+    if fifo_made {
+        outs.push(("out.fifo", "not a regular file"));
+    }
+    for (out, why) in outs {
+        let o = mapc()
+            .current_dir(dir.path())
+            .args(["build", "office-demo.yaml", "-o", out, "--fit-queries", "5"])
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "-o {out}: {}", text(&o));
+        assert!(text(&o).contains(why), "-o {out}: {}", text(&o));
+    }
+    let after: Vec<Vec<u8>> = ["office-demo.pgm", "office-demo.yaml"]
+        .iter()
+        .map(|f| std::fs::read(dir.path().join(f)).unwrap())
+        .collect();
+    assert!(before == after, "an input was changed");
+    if fifo_made {
+        use std::os::unix::fs::FileTypeExt;
+        let t = std::fs::metadata(dir.path().join("out.fifo"))
+            .unwrap()
+            .file_type();
+        assert!(t.is_fifo(), "the FIFO was replaced by a file");
+    }
+}

@@ -65,6 +65,49 @@ pub fn check_writable(path: &Path) -> io::Result<()> {
     temp_beside(path).map(drop)
 }
 
+/// Checks that `path` may receive a new file by rename: it does not exist,
+/// or it is a regular file (following symlinks) that is none of `inputs`
+/// (compared by device and inode, so another name for the same file is
+/// caught too). A device (`/dev/null`, `/dev/stdout`), a FIFO or a
+/// directory would be replaced by a regular file; an input would be
+/// destroyed by its own output. The error is `InvalidInput` and says which.
+pub fn check_output_path(path: &Path, inputs: &[&Path]) -> io::Result<()> {
+    let refuse = |why: String| Err(io::Error::new(io::ErrorKind::InvalidInput, why));
+    let meta = match std::fs::metadata(path) {
+        Ok(m) => m,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(e),
+    };
+    if !meta.is_file() {
+        return refuse(
+            "not a regular file (a device, FIFO or directory): the output must be a new name or a regular file".into(),
+        );
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        for input in inputs {
+            if let Ok(m) = std::fs::metadata(input) {
+                if (m.dev(), m.ino()) == (meta.dev(), meta.ino()) {
+                    return refuse(format!(
+                        "is the same file as the input {}: writing it would destroy the input",
+                        input.display()
+                    ));
+                }
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    for input in inputs {
+        if let (Ok(a), Ok(b)) = (std::fs::canonicalize(input), std::fs::canonicalize(path)) {
+            if a == b {
+                return refuse(format!("is the same file as the input {}", input.display()));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Runs `fill` on a temporary file beside `path`, then renames it to `path`.
 /// On any error the temporary file is removed and `path` is untouched.
 pub fn write_atomic<T>(
@@ -166,6 +209,29 @@ mod tests {
         assert_eq!(e.kind(), io::ErrorKind::InvalidData, "{e}");
         assert!(e.to_string().contains("does not read back"), "{e}");
         assert_eq!(std::fs::read(&p).unwrap(), b"good");
+    }
+
+    #[test]
+    fn output_paths_that_are_inputs_or_special_files_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let map = dir.path().join("m.yaml");
+        std::fs::write(&map, b"image: m.pgm").unwrap();
+        let new = dir.path().join("new.refdb");
+        check_output_path(&new, &[&map]).unwrap();
+        std::fs::write(&new, b"old db").unwrap();
+        check_output_path(&new, &[&map]).unwrap();
+        let e = check_output_path(&map, &[&map]).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::InvalidInput, "{e}");
+        assert!(e.to_string().contains("same file as the input"), "{e}");
+        // Another name for the input (a hard link) is the same file.
+        let link = dir.path().join("alias.refdb");
+        std::fs::hard_link(&map, &link).unwrap();
+        assert!(check_output_path(&link, &[&map]).is_err());
+        let e = check_output_path(dir.path(), &[]).unwrap_err();
+        assert!(e.to_string().contains("not a regular file"), "{e}");
+        if Path::new("/dev/null").exists() {
+            assert!(check_output_path(Path::new("/dev/null"), &[]).is_err());
+        }
     }
 
     #[test]

@@ -210,11 +210,17 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     });
     // Fail now, not after minutes of compiling, when the result could not
     // be saved (read-only or missing directory). Any existing file stays.
+    let refuse_out = |e: std::io::Error| input_err(anyhow::anyhow!("-o {}: {e}", out.display()));
+    mapc::writer::check_output_path(&out, &[&a.map]).map_err(refuse_out)?;
     mapc::writer::check_writable(&out)
         .map_err(|e| fail_err(anyhow::anyhow!("{}: cannot write: {e}", out.display())))?;
     let sp = ui.stage("loading map");
     let mut laps = pipeline::Laps::start();
     let src = load_map(&a.map, a.resolution, a.origin).map_err(input_err)?;
+    // The image (and the YAML) the map named are inputs too.
+    let mut inputs: Vec<&std::path::Path> = vec![&src.image_path];
+    inputs.extend(src.yaml_path.as_deref());
+    mapc::writer::check_output_path(&out, &inputs).map_err(refuse_out)?;
     laps.lap("load");
     sp.set_message("compiling");
     let mut built = pipeline::build(&src, &cfg)
