@@ -68,7 +68,7 @@ pub use localize::{
     localize, scratch_size, Candidate, Localization, LocalizeError, RangeScan, Scan,
 };
 #[cfg(feature = "mmap")]
-pub use mmap::{open_mmap, OpenError};
+pub use mmap::{map_file, open_mmap, OpenError};
 pub use params::{BadParam, Params, Selection, SensorModel};
 
 #[cfg(test)]

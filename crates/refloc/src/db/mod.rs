@@ -64,7 +64,7 @@ pub struct DbError {
     /// Found value, when meaningful.
     pub found: u64,
     /// For [`DbErrorKind::Value`]: the value found, bits of an f64 (integers
-    /// exactly, reals as stored); see [`DbError::value`].
+    /// exactly, reals as stored); see [`DbError::found_value`].
     value_bits: Option<u64>,
     /// For [`DbErrorKind::Alignment`]: the container's address is off (the
     /// file is fine; `found` is the address modulo `expected`), not the

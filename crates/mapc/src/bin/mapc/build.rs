@@ -210,6 +210,10 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     });
     // Fail now, not after minutes of compiling, when the result could not
     // be saved (read-only or missing directory). Any existing file stays.
+    // The output path is checked twice, each time against the inputs known
+    // then: here against the map given (before check_writable, which would
+    // otherwise report "." or a device as unwritable), and after loading
+    // against the image and YAML the map names.
     let refuse_out = |e: std::io::Error| input_err(anyhow::anyhow!("-o {}: {e}", out.display()));
     mapc::writer::check_output_path(&out, &[&a.map]).map_err(refuse_out)?;
     mapc::writer::check_writable(&out)

@@ -128,7 +128,7 @@ pub fn read_aux_text(path: &Path, option: &str) -> Result<String, CliError> {
 /// while a mapped database is in use can kill the process with SIGBUS; a
 /// copy in memory cannot be changed under it. (`mapc build` replaces files
 /// by rename, which leaves a running reader's mapping intact either way.)
-/// Larger databases are mapped (`refloc::open_mmap`, its contract applies).
+/// Larger databases are mapped (`refloc::map_file`, its contract applies).
 pub const MAX_READ_DB_BYTES: u64 = 256 << 20;
 
 /// A database's bytes: a 4-byte aligned copy in memory, or a mapping.
@@ -187,13 +187,7 @@ pub fn open_db(path: &Path, check: Check) -> Result<refloc::RefDb<DbBytes>, CliE
             .map_err(|e| bad(format!("cannot read {len} bytes: {e}")))?;
         DbBytes::Owned { words, len }
     } else {
-        let f = std::fs::File::open(path).map_err(|e| bad(e.to_string()))?;
-        // SAFETY: the file is opened read-only and the mapping is only read;
-        // a file changed in place by another process while mapped is
-        // outside what this program can prevent (see MAX_READ_DB_BYTES).
-        #[allow(unsafe_code)]
-        let m = unsafe { memmap2::Mmap::map(&f) }.map_err(|e| bad(e.to_string()))?;
-        DbBytes::Mapped(m)
+        DbBytes::Mapped(refloc::map_file(path).map_err(|e| bad(e.to_string()))?)
     };
     let db = refloc::RefDb::new(bytes).map_err(|e| bad(e.to_string()))?;
     if check == Check::Full && VERIFY_CRCS.load(Ordering::Relaxed) {
