@@ -6,6 +6,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+mod common;
+
 fn mapc(args: &[&str], cwd: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_mapc"))
         .args(args)
@@ -149,28 +151,7 @@ fn diff_reports_changes() {
 fn localize_a_batch_of_json_lines() {
     let dir = tempfile::tempdir().unwrap();
     let dbp = built(dir.path(), &[]);
-    let bytes = std::fs::read(&dbp).unwrap();
-    let mut al = vec![0u32; bytes.len().div_ceil(4)];
-    zerocopy::IntoBytes::as_mut_bytes(&mut al[..])[..bytes.len()].copy_from_slice(&bytes);
-    let db = refloc::RefDb::new(&zerocopy::IntoBytes::as_bytes(&al[..])[..bytes.len()]).unwrap();
-    let poses = mapc::eval::sample_poses(&db, 6, 0.4, 11);
-    let lidar = mapc::sim::Lidar::new(362, 2.0 * std::f32::consts::PI, 30.0);
-    let mut lines = String::new();
-    for (k, p) in poses.iter().enumerate() {
-        let ranges = mapc::sim::virtual_scan(&db.grid(), &db.frame(), p, &lidar);
-        let data = mapc::scanio::ScanData::Ranges {
-            angle_min: lidar.angle_min,
-            angle_increment: lidar.angle_increment,
-            range_min: 0.0,
-            range_max: 30.0,
-            ranges: ranges
-                .iter()
-                .map(|r| if r.is_finite() { *r } else { f32::NAN })
-                .collect(),
-        };
-        lines.push_str(&mapc::scanio::scan_to_json(&data, &format!("s{k}"), None));
-        lines.push('\n');
-    }
+    let (poses, mut lines) = common::jsonl_scans(&std::fs::read(&dbp).unwrap(), 6, 11);
     // One malformed line in the middle: reported, the batch goes on.
     lines.push_str("{\"id\": \"bad\", \"angle_min\": \"x\"}\n");
     let input = dir.path().join("scans.jsonl");

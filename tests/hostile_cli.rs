@@ -11,6 +11,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::sync::OnceLock;
 
+mod common;
+
 fn mapc() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_mapc"));
     c.env("NO_COLOR", "1");
@@ -45,31 +47,7 @@ fn fixture() -> (&'static Path, &'static Path) {
             .output()
             .unwrap();
         assert!(o.status.success(), "build: {}", text(&o));
-        let bytes = std::fs::read(&db).unwrap();
-        let mut al = vec![0u32; bytes.len().div_ceil(4)];
-        zerocopy::IntoBytes::as_mut_bytes(&mut al[..])[..bytes.len()].copy_from_slice(&bytes);
-        let rdb =
-            refloc::RefDb::new(&zerocopy::IntoBytes::as_bytes(&al[..])[..bytes.len()]).unwrap();
-        let lidar = mapc::sim::Lidar::new(362, 2.0 * std::f32::consts::PI, 30.0);
-        let mut lines = String::new();
-        for (k, p) in mapc::eval::sample_poses(&rdb, SCANS, 0.4, 5)
-            .iter()
-            .enumerate()
-        {
-            let ranges = mapc::sim::virtual_scan(&rdb.grid(), &rdb.frame(), p, &lidar);
-            let data = mapc::scanio::ScanData::Ranges {
-                angle_min: lidar.angle_min,
-                angle_increment: lidar.angle_increment,
-                range_min: 0.0,
-                range_max: 30.0,
-                ranges: ranges
-                    .iter()
-                    .map(|r| if r.is_finite() { *r } else { f32::NAN })
-                    .collect(),
-            };
-            lines.push_str(&mapc::scanio::scan_to_json(&data, &format!("s{k}"), None));
-            lines.push('\n');
-        }
+        let (_, lines) = common::jsonl_scans(&std::fs::read(&db).unwrap(), SCANS, 5);
         let scans = dir.path().join("scans.jsonl");
         std::fs::write(&scans, lines).unwrap();
         (dir, db, scans)

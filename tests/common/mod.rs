@@ -227,3 +227,33 @@ pub fn error(pose: &Pose2, truth: &Pose2) -> (f32, f32) {
         refloc::wrap_angle(pose.theta - truth.theta).abs(),
     )
 }
+
+/// Simulated scans of a database file, for tests that run `mapc localize`:
+/// `n` poses sampled in its free space (seed `seed`), a noise-free 362-beam
+/// full-turn scan at each, written as JSON Lines with ids `s0`, `s1`, ...
+/// (no return as null). Returns the poses and the text.
+pub fn jsonl_scans(db_file: &[u8], n: usize, seed: u64) -> (Vec<Pose2>, String) {
+    let mut words = vec![0u32; db_file.len().div_ceil(4)];
+    zerocopy::IntoBytes::as_mut_bytes(&mut words[..])[..db_file.len()].copy_from_slice(db_file);
+    let db = RefDb::new(&zerocopy::IntoBytes::as_bytes(&words[..])[..db_file.len()])
+        .expect("a database built by mapc reads");
+    let poses = mapc::eval::sample_poses(&db, n, 0.4, seed);
+    let lidar = Lidar::new(362, 2.0 * std::f32::consts::PI, 30.0);
+    let mut lines = String::new();
+    for (k, p) in poses.iter().enumerate() {
+        let ranges = sim::virtual_scan(&db.grid(), &db.frame(), p, &lidar);
+        let data = mapc::scanio::ScanData::Ranges {
+            angle_min: lidar.angle_min,
+            angle_increment: lidar.angle_increment,
+            range_min: 0.0,
+            range_max: 30.0,
+            ranges: ranges
+                .iter()
+                .map(|r| if r.is_finite() { *r } else { f32::NAN })
+                .collect(),
+        };
+        lines.push_str(&mapc::scanio::scan_to_json(&data, &format!("s{k}"), None));
+        lines.push('\n');
+    }
+    (poses, lines)
+}
