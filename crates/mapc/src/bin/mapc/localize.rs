@@ -22,15 +22,8 @@ use crate::util::{fail_err, input_err, open_db, Check, CliError, CliResult, Ui};
 struct Sink<W: Write> {
     out: std::io::BufWriter<W>,
     flush_each: bool,
-}
-
-/// What became of one write.
-#[derive(Debug, PartialEq, Eq)]
-enum Written {
-    /// The line is out (or in the buffer).
-    Ok,
-    /// The reader has gone: stop localizing.
-    Closed,
+    /// The reader has gone (a write met a closed pipe): stop localizing.
+    closed: bool,
 }
 
 impl<W: Write> Sink<W> {
@@ -38,11 +31,15 @@ impl<W: Write> Sink<W> {
         Sink {
             out: std::io::BufWriter::new(w),
             flush_each,
+            closed: false,
         }
     }
 
-    /// Writes one line (a newline is added).
-    fn line(&mut self, s: &str) -> Result<Written, CliError> {
+    /// Writes one line (a newline is added); nothing once closed.
+    fn line(&mut self, s: &str) -> Result<(), CliError> {
+        if self.closed {
+            return Ok(());
+        }
         let r = writeln!(self.out, "{s}").and_then(|()| {
             if self.flush_each {
                 self.out.flush()
@@ -53,16 +50,22 @@ impl<W: Write> Sink<W> {
         self.outcome(r)
     }
 
-    /// Flushes what is buffered.
-    fn finish(&mut self) -> Result<Written, CliError> {
+    /// Flushes what is buffered; nothing once closed.
+    fn finish(&mut self) -> Result<(), CliError> {
+        if self.closed {
+            return Ok(());
+        }
         let r = self.out.flush();
         self.outcome(r)
     }
 
-    fn outcome(&mut self, r: std::io::Result<()>) -> Result<Written, CliError> {
+    fn outcome(&mut self, r: std::io::Result<()>) -> Result<(), CliError> {
         match r {
-            Ok(()) => Ok(Written::Ok),
-            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(Written::Closed),
+            Ok(()) => Ok(()),
+            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {
+                self.closed = true;
+                Ok(())
+            }
             Err(e) => Err(fail_err(anyhow::anyhow!(
                 "cannot write the results to standard output: {e}"
             ))),
@@ -136,7 +139,6 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         scanio::open_input(&a.input).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.input)))?;
     let stdout = std::io::stdout();
     let mut out = Sink::new(stdout.lock(), is_stream(&a.input));
-    let mut closed = false;
     let mut scratch: Vec<u8> = Vec::new();
     let (mut n, mut failed, mut accepted, mut correct, mut false_acc) =
         (0usize, 0usize, 0usize, 0usize, 0usize);
@@ -146,13 +148,13 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     let mut errs: Vec<f64> = Vec::new();
     let mut times: Vec<f64> = Vec::new();
     if text {
-        closed |= out.line(&format!(
+        out.line(&format!(
             "{:<12} {:>4} {:>9} {:>9} {:>8} {:>6} {:>9} {:>8} {:>8} {:>8}",
             "id", "ok", "x_m", "y_m", "theta", "site", "E", "M", "M_thr", "time_ms"
-        ))? == Written::Closed;
+        ))?;
     }
     for (k, item) in scanio::read_scans(reader, fmt, &opts).enumerate() {
-        if closed {
+        if out.closed {
             break;
         }
         n += 1;
@@ -169,7 +171,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                 } else {
                     json!({"id": e.id, "line": e.line, "error": e.message}).to_string()
                 };
-                closed = out.line(&line)? == Written::Closed;
+                out.line(&line)?;
                 continue;
             }
         };
@@ -274,7 +276,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                     }
                 }
                 if text {
-                    closed = out.line(&format!(
+                    out.line(&format!(
                         "{:<12} {:>4} {:>9.3} {:>9.3} {:>8.4} {:>6} {:>9.1} {:>8.1} {:>8.1} {:>8.2}{}",
                         scan.id,
                         if l.accepted { "yes" } else { "no" },
@@ -287,7 +289,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                         l.vicinity_threshold,
                         time_us as f64 / 1000.0,
                         err.map(|(e, t)| format!("  err {:.3} m {:.2} deg", e, t.to_degrees())).unwrap_or_default()
-                    ))? == Written::Closed;
+                    ))?;
                 } else {
                     let mut o = json!({
                         "id": scan.id, "accepted": l.accepted,
@@ -320,7 +322,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                             o["truth_refined_vicinity_ratio"] = json!(refined_fit);
                         }
                     }
-                    closed = out.line(&o.to_string())? == Written::Closed;
+                    out.line(&o.to_string())?;
                 }
             }
             Err(e) => {
@@ -331,14 +333,12 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                     json!({"id": scan.id, "accepted": false, "reason": e.to_string(), "time_us": time_us})
                         .to_string()
                 };
-                closed = out.line(&line)? == Written::Closed;
+                out.line(&line)?;
             }
         }
     }
-    if !closed {
-        closed = out.finish()? == Written::Closed;
-    }
-    if closed {
+    out.finish()?;
+    if out.closed {
         ui.note(&format!(
             "output closed by its reader after {n} scans; stopped there"
         ));
