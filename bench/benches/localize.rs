@@ -22,10 +22,10 @@ use std::time::{Duration, Instant};
 
 use criterion::{BenchmarkId, Criterion, SamplingMode};
 use mapc::rng::Rng;
-use refloc::{localize, scratch_size, Pose2, RefDb};
+use refloc::{localize, scratch_size, Localizer, Pose2, RefDb};
 use refloc_bench::{
-    candidates, median, quantile, query_stats, rank, refine, scan_set, sensor_pose, verify,
-    Condition, Database, Kind, Query, Work, SCAN_COUNT,
+    candidates, median, quantile, query_stats, scan_set, Condition, Database, Kind, Query, Work,
+    SCAN_COUNT,
 };
 
 type Db<'a> = RefDb<&'a [u8]>;
@@ -141,17 +141,20 @@ fn shuffled<T>(mut v: Vec<T>, seed: u64) -> Vec<T> {
     v
 }
 
+/// Runs `f` on the localizer with query `q` prepared, and returns what `f`
+/// timed (zero when the localizer rejects the scan).
+fn on_query<D: AsRef<[u8]>>(
+    work: &mut Work,
+    db: &RefDb<D>,
+    q: &Query,
+    f: impl FnOnce(&mut Localizer<'_, '_, D>) -> Duration,
+) -> Duration {
+    work.prepared(db, q)
+        .map_or(Duration::ZERO, |mut loc| f(&mut loc))
+}
+
 fn bench_stages(c: &mut Criterion, db: &Db<'_>, kind: Kind, cond: Condition, qs: &[Query]) {
-    let params = db.params();
-    let mut work = Work::new(params);
-    // Inputs of the later stages, computed once.
-    let hists: Vec<(Option<usize>, Vec<f32>)> = qs
-        .iter()
-        .map(|q| {
-            let (w, cells) = work.histogram(params, q);
-            (w, work.hist[..cells].to_vec())
-        })
-        .collect();
+    let mut work = Work::new(db, kind.beams());
     // (query, site) pairs of every query's coarse candidate list.
     let pairs: Vec<(usize, usize)> = qs
         .iter()
@@ -169,10 +172,10 @@ fn bench_stages(c: &mut Criterion, db: &Db<'_>, kind: Kind, cond: Condition, qs:
         .enumerate()
         .filter_map(|(i, q)| {
             let site = q.correct_site?;
-            work.prepare_query(params, q);
-            let m = work.ssm(db, site)?;
-            let s = sensor_pose(db, site, &m);
-            Some((i, site, s, refine(db, q, s)))
+            let mut loc = work.prepared(db, q)?;
+            let m = loc.match_site(site)?;
+            let s = loc.sensor_pose(site, &m);
+            Some((i, site, s, loc.refine_pose(s)))
         })
         .collect();
     println!(
@@ -190,26 +193,30 @@ fn bench_stages(c: &mut Criterion, db: &Db<'_>, kind: Kind, cond: Condition, qs:
         .warm_up_time(Duration::from_secs(1))
         .measurement_time(Duration::from_secs(4));
     g.bench_function("histogram", |b| {
-        cycle(b, qs.len(), |i| timed(|| work.histogram(params, &qs[i])))
+        cycle(b, qs.len(), |i| {
+            on_query(&mut work, db, &qs[i], |loc| timed(|| loc.histogram()))
+        })
     });
-    let mut top = work.top.clone();
     g.bench_function("coarse", |b| {
-        cycle(b, hists.len(), |i| {
-            let (w, h) = &hists[i];
-            timed(|| rank(db, h, *w, &mut top))
+        cycle(b, qs.len(), |i| {
+            on_query(&mut work, db, &qs[i], |loc| {
+                loc.histogram();
+                timed(|| loc.rank_sites())
+            })
         })
     });
     g.bench_function("query_prep", |b| {
         cycle(b, qs.len(), |i| {
-            timed(|| work.prepare_query(params, &qs[i]))
+            work.localizer(db).map_or(Duration::ZERO, |mut loc| {
+                timed(|| loc.prepare(&qs[i].scan()).is_ok())
+            })
         })
     });
     if !correct.is_empty() {
         g.bench_function("ssm_correct", |b| {
             cycle(b, correct.len(), |i| {
                 let (q, site, ..) = correct[i];
-                work.prepare_query(params, &qs[q]);
-                timed(|| work.ssm(db, site))
+                on_query(&mut work, db, &qs[q], |loc| timed(|| loc.match_site(site)))
             })
         });
     }
@@ -217,20 +224,19 @@ fn bench_stages(c: &mut Criterion, db: &Db<'_>, kind: Kind, cond: Condition, qs:
         g.bench_function("ssm_candidate", |b| {
             cycle(b, pairs.len(), |i| {
                 let (q, site) = pairs[i];
-                work.prepare_query(params, &qs[q]);
-                timed(|| work.ssm(db, site))
+                on_query(&mut work, db, &qs[q], |loc| timed(|| loc.match_site(site)))
             })
         });
         // The whole per-candidate body of the localizer's fine loop.
         g.bench_function("candidate", |b| {
             cycle(b, pairs.len(), |i| {
                 let (q, site) = pairs[i];
-                let q = &qs[q];
-                work.prepare_query(params, q);
-                timed(|| {
-                    work.ssm(db, site).map(|m| {
-                        let s = refine(db, q, sensor_pose(db, site, &m));
-                        verify(db, q, &s)
+                on_query(&mut work, db, &qs[q], |loc| {
+                    timed(|| {
+                        loc.match_site(site).map(|m| {
+                            let s = loc.refine_pose(loc.sensor_pose(site, &m));
+                            loc.verify_pose(&s)
+                        })
                     })
                 })
             })
@@ -240,13 +246,13 @@ fn bench_stages(c: &mut Criterion, db: &Db<'_>, kind: Kind, cond: Condition, qs:
         g.bench_function("refine", |b| {
             cycle(b, correct.len(), |i| {
                 let (q, _, s, _) = correct[i];
-                timed(|| refine(db, &qs[q], s))
+                on_query(&mut work, db, &qs[q], |loc| timed(|| loc.refine_pose(s)))
             })
         });
         g.bench_function("verify", |b| {
             cycle(b, correct.len(), |i| {
                 let (q, _, _, s) = correct[i];
-                timed(|| verify(db, &qs[q], &s))
+                on_query(&mut work, db, &qs[q], |loc| timed(|| loc.verify_pose(&s)))
             })
         });
     }

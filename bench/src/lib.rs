@@ -10,8 +10,8 @@
 //!   free poses (`mapc::eval::sample_poses`, clearance 0.3 m, seed
 //!   [`POSE_SEED`]) for each [`Kind`] of scanner, static (exact ranges) or
 //!   dynamic (5 mm range noise and 60 random short returns, as `mapc eval`).
-//! - [`Work`]: the localizer's stages run one at a time on owned buffers,
-//!   exactly as `refloc::localize` runs them, so each can be timed alone.
+//! - [`Work`]: an owned scratch for a `refloc::Localizer`, whose stages
+//!   the benchmarks run (and time) one at a time.
 
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -22,11 +22,8 @@ use mapc::pipeline::{self, BuildConfig};
 use mapc::rng::Rng;
 use mapc::sim::{self, Lidar};
 use mapc::synth::{self, SynthKind, SynthOptions};
-use refloc::coarse::{self, Ranked};
-use refloc::refine::DistMap;
-use refloc::ssm::{self, Affinity, SsmResult, SsmWork, DESC_LEN};
-use refloc::verify::{self, Vicinity};
-use refloc::{localize, prep, scratch_size, Params, Pose2, RangeScan, RefDb, Scan};
+use refloc::verify;
+use refloc::{localize, scratch_size, Localizer, Pose2, RangeScan, RefDb, Scan};
 
 /// Scans per set.
 pub const SCAN_COUNT: usize = 50;
@@ -226,7 +223,7 @@ fn synthetic_office() -> Result<(MapSource, tempfile::TempDir), String> {
     Ok((src, dir))
 }
 
-/// One simulated query, with the localizer's view of it precomputed.
+/// One simulated query.
 pub struct Query {
     /// True robot pose.
     pub truth: Pose2,
@@ -234,16 +231,6 @@ pub struct Query {
     pub lidar: Lidar,
     /// Ranges (m; `INFINITY`: no return).
     pub ranges: Vec<f32>,
-    /// Beam-ordered sensor-frame points (NaN: no return), as the localizer loads them.
-    pub dense: Vec<[f32; 2]>,
-    /// Beam angles (rad).
-    pub angles: Vec<f32>,
-    /// Ranges with `INFINITY` for every invalid beam.
-    pub valid_ranges: Vec<f32>,
-    /// Angular coverage (rad).
-    pub fov: f32,
-    /// Closes a full turn.
-    pub wrap: bool,
     /// The nearest site in line of sight of the true sensor position.
     pub correct_site: Option<usize>,
 }
@@ -283,243 +270,62 @@ pub fn scan_set<D: AsRef<[u8]>>(
             let mut ranges = sim::virtual_scan(&grid, &frame, &sensor, &lidar);
             let mut rng = Rng::stream(NOISE_SEED, k as u64);
             sim::add_noise(&mut ranges, &lidar, &cond.noise(), &mut rng);
-            let mut dense = vec![[0f32; 2]; ranges.len()];
-            prep::ranges_to_points(
-                &ranges,
-                lidar.angle_min,
-                lidar.angle_increment,
-                lidar.range_min,
-                lidar.range_max,
-                &mut dense,
-            );
-            let angles: Vec<f32> = (0..ranges.len())
-                .map(|i| lidar.angle_min + i as f32 * lidar.angle_increment)
-                .collect();
-            let valid_ranges = dense
-                .iter()
-                .zip(&ranges)
-                .map(|(p, &r)| if p[0].is_finite() { r } else { f32::INFINITY })
-                .collect();
-            // As refloc::localize's load_scan (increment > 0 here).
-            let inc = lidar.angle_increment;
-            let span = inc * lidar.beams as f32;
-            let fov = span.min(2.0 * std::f32::consts::PI);
-            let wrap = span >= 2.0 * std::f32::consts::PI - 1.5 * inc;
             Query {
                 truth: *truth,
                 lidar,
                 ranges,
-                dense,
-                angles,
-                valid_ranges,
-                fov,
-                wrap,
                 correct_site: eval::correct_site(db, [sensor.x, sensor.y]),
             }
         })
         .collect()
 }
 
-/// SSM working memory as owned vectors (see `mapc::eval::ssm_trial`).
-pub struct SsmBufs {
-    qdesc: Vec<f32>,
-    rdesc: Vec<f32>,
-    tent: Vec<[u16; 2]>,
-    aff: Vec<Affinity>,
-    x: Vec<f32>,
-    y: Vec<f32>,
-    order: Vec<u16>,
-    acc: Vec<[u16; 2]>,
-    flags: Vec<u8>,
-}
-
-impl SsmBufs {
-    fn new(params: &Params) -> SsmBufs {
-        let np = params.max_points as usize;
-        let nl = np * params.tentative_k as usize;
-        SsmBufs {
-            qdesc: vec![0.0; np * DESC_LEN],
-            rdesc: vec![0.0; np * DESC_LEN],
-            tent: vec![[0; 2]; nl],
-            aff: vec![Affinity::default(); params.affinity_cap as usize],
-            x: vec![0.0; nl],
-            y: vec![0.0; nl],
-            order: vec![0; nl],
-            acc: vec![[0; 2]; np],
-            flags: vec![0; 3 * np + nl],
-        }
-    }
-
-    fn work(&mut self) -> SsmWork<'_> {
-        SsmWork {
-            qdesc: &mut self.qdesc,
-            rdesc: &mut self.rdesc,
-            tent: &mut self.tent,
-            aff: &mut self.aff,
-            x: &mut self.x,
-            y: &mut self.y,
-            order: &mut self.order,
-            acc: &mut self.acc,
-            flags: &mut self.flags,
-        }
-    }
-}
-
-/// The localizer's stages on owned buffers, one call per stage, computed as
-/// `refloc::localize` computes them.
+/// The scratch memory of a [`Localizer`], owned, so the benchmarks can run
+/// the localizer's stages one at a time exactly as `refloc::localize` runs
+/// them (the stages are the localizer's own methods).
 pub struct Work {
-    h_pts: Vec<[f32; 2]>,
-    h_tan: Vec<[f32; 2]>,
-    /// The query histogram (first `cells` entries after [`Work::histogram`]).
-    pub hist: Vec<f32>,
-    /// Coarse ranking buffer, `nc_max` long.
-    pub top: Vec<Ranked>,
-    q_pts: Vec<[f32; 2]>,
-    q_tan: Vec<[f32; 2]>,
-    nq: usize,
-    r_dense: Vec<[f32; 2]>,
-    r_pts: Vec<[f32; 2]>,
-    r_tan: Vec<[f32; 2]>,
-    ssm: SsmBufs,
+    scratch: Vec<u8>,
+    beams: usize,
 }
 
 impl Work {
-    /// Buffers for a database with `params`.
-    pub fn new(params: &Params) -> Work {
-        let np = params.max_points as usize;
+    /// Scratch for scans of up to `beams` beams against `db`.
+    pub fn new<D: AsRef<[u8]>>(db: &RefDb<D>, beams: usize) -> Work {
         Work {
-            h_pts: vec![[0.0; 2]; np],
-            h_tan: vec![[0.0; 2]; np],
-            hist: vec![0.0; params.hist_cells().max(params.win_cells())],
-            top: vec![Ranked::default(); params.nc_max as usize],
-            q_pts: vec![[0.0; 2]; np],
-            q_tan: vec![[0.0; 2]; np],
-            nq: 0,
-            r_dense: vec![[0.0; 2]; params.sensor.beams as usize],
-            r_pts: vec![[0.0; 2]; np],
-            r_tan: vec![[0.0; 2]; np],
-            ssm: SsmBufs::new(params),
+            scratch: vec![0u8; scratch_size(db.params(), beams)],
+            beams,
         }
     }
 
-    /// Stage "histogram": `coarse::query_histogram` (preparation of the
-    /// possibly cropped scan and its PGR histogram). Returns (window, cells).
-    pub fn histogram(&mut self, params: &Params, q: &Query) -> (Option<usize>, usize) {
-        coarse::query_histogram(
-            &q.dense,
-            q.fov,
-            q.wrap,
-            params,
-            &mut self.h_pts,
-            &mut self.h_tan,
-            &mut self.hist,
-        )
+    /// A localizer over this scratch, no scan loaded yet.
+    pub fn localizer<'d, 's, D: AsRef<[u8]>>(
+        &'s mut self,
+        db: &'d RefDb<D>,
+    ) -> Option<Localizer<'d, 's, D>> {
+        Localizer::new(db, &mut self.scratch, self.beams).ok()
     }
 
-    /// Stage "query prep": `prep::prepare` of the whole scan and the query
-    /// descriptors (done once per query). Returns the prepared point count.
-    pub fn prepare_query(&mut self, params: &Params, q: &Query) -> usize {
-        self.nq = prep::prepare(&q.dense, q.wrap, params, &mut self.q_pts, &mut self.q_tan);
-        ssm::descriptors(
-            &self.q_pts[..self.nq],
-            &self.q_tan[..self.nq],
-            params.desc_radius,
-            &mut self.ssm.qdesc,
-        );
-        self.nq
+    /// A localizer with `q` loaded and prepared (stage 1 done); `None` when
+    /// the localizer rejects the scan.
+    pub fn prepared<'d, 's, D: AsRef<[u8]>>(
+        &'s mut self,
+        db: &'d RefDb<D>,
+        q: &Query,
+    ) -> Option<Localizer<'d, 's, D>> {
+        let mut loc = self.localizer(db)?;
+        loc.prepare(&q.scan()).ok()?;
+        Some(loc)
     }
-
-    /// Stage "SSM per candidate", after [`Work::prepare_query`]: the site's
-    /// reference scan to points, `prep::prepare`, `ssm::descriptors`,
-    /// `ssm::match_scans`.
-    pub fn ssm<D: AsRef<[u8]>>(&mut self, db: &RefDb<D>, site: usize) -> Option<SsmResult> {
-        let params = db.params();
-        let s = &params.sensor;
-        let ref_wrap = s.angle_increment * s.beams as f32
-            >= 2.0 * std::f32::consts::PI - 1.5 * s.angle_increment;
-        let n = prep::ranges_to_points(
-            db.scan(site),
-            s.angle_min,
-            s.angle_increment,
-            s.range_min,
-            s.range_max,
-            &mut self.r_dense,
-        );
-        let nr = prep::prepare(
-            &self.r_dense[..n],
-            ref_wrap,
-            params,
-            &mut self.r_pts,
-            &mut self.r_tan,
-        );
-        ssm::descriptors(
-            &self.r_pts[..nr],
-            &self.r_tan[..nr],
-            params.desc_radius,
-            &mut self.ssm.rdesc,
-        );
-        let nq = self.nq;
-        ssm::match_scans(
-            &self.q_pts[..nq],
-            &self.q_tan[..nq],
-            &self.r_pts[..nr],
-            &self.r_tan[..nr],
-            params,
-            &mut self.ssm.work(),
-        )
-    }
-}
-
-/// Stage "coarse": every site's score against a query histogram from
-/// [`Work::histogram`] (its first `cells` entries, with `window`), the top
-/// `top.len()` sites into `top`, and the N_C rule. Returns N_C.
-pub fn rank<D: AsRef<[u8]>>(
-    db: &RefDb<D>,
-    hist: &[f32],
-    window: Option<usize>,
-    top: &mut [Ranked],
-) -> usize {
-    let ranked = coarse::rank_top_scores(
-        (0..db.site_count()).map(|s| coarse::site_score(db, hist, window, s)),
-        top,
-    );
-    let p = db.params();
-    coarse::candidate_count(
-        &top[..ranked],
-        p.nc_min as usize,
-        p.nc_max as usize,
-        p.nc_margin,
-    )
 }
 
 /// The coarse candidates (sites, best first) `refloc::localize` would
 /// examine for `q` at most.
 pub fn candidates<D: AsRef<[u8]>>(db: &RefDb<D>, q: &Query, work: &mut Work) -> Vec<usize> {
-    let (w, cells) = work.histogram(db.params(), q);
-    let nc = rank(db, &work.hist[..cells], w, &mut work.top);
-    work.top[..nc].iter().map(|r| r.site as usize).collect()
-}
-
-/// The sensor pose (map frame) an SSM result against `site` gives.
-pub fn sensor_pose<D: AsRef<[u8]>>(db: &RefDb<D>, site: usize, m: &SsmResult) -> Pose2 {
-    let sxy = db.site_xy(site);
-    Pose2::new(sxy[0], sxy[1], 0.0).compose(&m.pose)
-}
-
-/// Stage "refine": `refine::refine` of `sensor` with the database's settings.
-pub fn refine<D: AsRef<[u8]>>(db: &RefDb<D>, q: &Query, sensor: Pose2) -> Pose2 {
-    let p = db.params();
-    let dm = DistMap::of(db);
-    refloc::refine::refine(&dm, &q.dense, sensor, p.refine_iters, p.refine_max_dist).0
-}
-
-/// Stage "verify": the vicinity score of `sensor`.
-pub fn verify<D: AsRef<[u8]>>(db: &RefDb<D>, q: &Query, sensor: &Pose2) -> Vicinity {
-    let grid = db.grid();
-    verify::Verifier::new(db, &grid, q.lidar.range_max).score(
-        sensor,
-        q.angles.iter().copied().zip(q.valid_ranges.iter().copied()),
-    )
+    let Some(mut loc) = work.prepared(db, q) else {
+        return Vec::new();
+    };
+    loc.rank();
+    loc.ranked().iter().map(|r| r.site as usize).collect()
 }
 
 /// One query's outcome in [`query_stats`].
@@ -549,7 +355,7 @@ pub struct QueryStat {
 pub fn query_stats<D: AsRef<[u8]>>(db: &RefDb<D>, qs: &[Query], reps: usize) -> Vec<QueryStat> {
     let beams = qs.iter().map(|q| q.ranges.len()).max().unwrap_or(0);
     let mut scratch = vec![0u8; scratch_size(db.params(), beams)];
-    let mut work = Work::new(db.params());
+    let mut work = Work::new(db, beams);
     qs.iter()
         .map(|q| {
             let mut best = Duration::MAX;
@@ -575,14 +381,10 @@ pub fn query_stats<D: AsRef<[u8]>>(db: &RefDb<D>, qs: &[Query], reps: usize) -> 
                                     .iter()
                                     .find(|c| c.rank == l.coarse_rank)
                                     .map_or(0, |c| c.pairs);
-                                let ratio = |n: u32| {
-                                    if n > 0 {
-                                        l.vicinity / (4.5 * n as f32)
-                                    } else {
-                                        0.0
-                                    }
-                                };
-                                (ratio(pairs), ratio(pairs.saturating_sub(l.short_beams)))
+                                (
+                                    verify::ratio(l.vicinity, pairs),
+                                    verify::ratio(l.vicinity, pairs.saturating_sub(l.short_beams)),
+                                )
                             },
                         )
                     }

@@ -1,5 +1,6 @@
 //! Coarse stage (paper section 4): correlation coefficient between the input
-//! histogram and every site's (eq. 21-22), and the adaptive candidate count.
+//! histogram and every site's (eq. 21-22, [`crate::rank::correlation`]), and
+//! the adaptive candidate count.
 //!
 //! N_C rule (see `docs/ssm.md` for the measurements behind it): the sites are
 //! ranked by gamma; every site whose gamma is within `nc_margin` of the best
@@ -14,42 +15,8 @@
 
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
-/// Correlation coefficient of two histograms with the joint mean of eq. 22:
-/// `h_bar = (sum h + sum g) / 2K`. Returns a value in [-1, 1]; 0 when either
-/// histogram is flat or non-finite.
-pub fn correlation(h: &[f32], g: &[f32]) -> f32 {
-    let k = h.len().min(g.len());
-    if k == 0 {
-        return 0.0;
-    }
-    let (mut sh, mut sg) = (0.0f32, 0.0f32);
-    for i in 0..k {
-        sh += h[i];
-        sg += g[i];
-    }
-    let mean = (sh + sg) / (2 * k) as f32;
-    let (mut num, mut dh, mut dg) = (0.0f32, 0.0f32, 0.0f32);
-    for i in 0..k {
-        let a = h[i] - mean;
-        let b = g[i] - mean;
-        num += a * b;
-        dh += a * a;
-        dg += b * b;
-    }
-    // A flat histogram has zero variance; rounding leaves a tiny residue that
-    // must not be read as signal.
-    let eps = 1e-9 * (sh * sh + sg * sg) / k as f32 + f32::MIN_POSITIVE;
-    if dh <= eps || dg <= eps {
-        return 0.0;
-    }
-    let den = libm::sqrtf(dh * dg);
-    let r = num / den;
-    if r.is_finite() {
-        r.clamp(-1.0, 1.0)
-    } else {
-        0.0
-    }
-}
+pub use crate::rank::correlation;
+use crate::rank::{self, Scored};
 
 /// A ranked site: index and correlation.
 #[derive(Clone, Copy, Debug, Default, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable)]
@@ -80,29 +47,20 @@ pub fn rank_top_scores(scores: impl Iterator<Item = f32>, top: &mut [Ranked]) ->
     n
 }
 
+impl Scored for Ranked {
+    fn score(&self) -> f32 {
+        self.gamma
+    }
+    fn key(&self) -> u32 {
+        self.site
+    }
+}
+
 /// Inserts `site` with score `g` into `top[..*n]` (best first, at most
 /// `top.len()`), keeping one entry per site: a site already listed keeps the
 /// better of its two scores.
 fn insert_unique(top: &mut [Ranked], n: &mut usize, site: u32, g: f32) {
-    let cap = top.len();
-    let better = |a: f32, ai: u32, b: &Ranked| a > b.gamma || (a == b.gamma && ai < b.site);
-    if cap == 0 || (*n == cap && !better(g, site, &top[cap - 1])) {
-        return;
-    }
-    let mut pos = match top[..*n].iter().position(|r| r.site == site) {
-        Some(p) if !better(g, site, &top[p]) => return,
-        Some(p) => p,
-        None if *n < cap => {
-            *n += 1;
-            *n - 1
-        }
-        None => cap - 1,
-    };
-    while pos > 0 && better(g, site, &top[pos - 1]) {
-        top[pos] = top[pos - 1];
-        pos -= 1;
-    }
-    top[pos] = Ranked { site, gamma: g };
+    rank::insert_unique(top, n, Ranked { site, gamma: g });
 }
 
 /// Ranks the sites for a query histogram computed by [`query_histogram`]

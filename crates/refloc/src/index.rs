@@ -9,7 +9,7 @@
 //! their members.
 //!
 //! Search is a beam search: from the root, every child of the kept nodes is
-//! scored by [`crate::coarse::correlation`] with its centroid; the best
+//! scored by [`crate::rank::correlation`] with its centroid; the best
 //! `beam` internal nodes go down a level, and the best `leaves` leaves met on
 //! the way are kept. The entries of the kept leaves are then scored exactly,
 //! as the exhaustive ranking would score them. Work per query is
@@ -309,7 +309,7 @@ impl<'a> Index<'a> {
                 let first = node.first.get() as usize;
                 let count = node.count.get() as usize;
                 for c in first..first.saturating_add(count).min(view.nodes.len()) {
-                    let s = crate::coarse::correlation(hist, view.centroid(c));
+                    let s = crate::rank::correlation(hist, view.centroid(c));
                     scored += 1;
                     let slot = Slot {
                         node: c as u32,
@@ -353,28 +353,19 @@ impl Slot {
     };
 }
 
+impl crate::rank::Scored for Slot {
+    fn score(&self) -> f32 {
+        self.score
+    }
+    fn key(&self) -> u32 {
+        self.node
+    }
+}
+
 /// Keeps `list[..*n]` the best `list.len()` slots, best first (ties: lower
 /// node first).
 fn insert(list: &mut [Slot], n: &mut usize, s: Slot) {
-    let cap = list.len();
-    if cap == 0 {
-        return;
-    }
-    let better = |a: &Slot, b: &Slot| a.score > b.score || (a.score == b.score && a.node < b.node);
-    if *n == cap && !better(&s, &list[cap - 1]) {
-        return;
-    }
-    let mut pos = if *n < cap {
-        *n += 1;
-        *n - 1
-    } else {
-        cap - 1
-    };
-    while pos > 0 && better(&s, &list[pos - 1]) {
-        list[pos] = list[pos - 1];
-        pos -= 1;
-    }
-    list[pos] = s;
+    crate::rank::insert(list, n, s);
 }
 
 #[cfg(test)]

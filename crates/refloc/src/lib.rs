@@ -8,12 +8,16 @@
 //! Pipeline, one module per stage (see `docs/architecture.md`):
 //! - [`prep`]: scan points, surfaces, resampling, tangents.
 //! - [`pgr`]: pairwise geometric relationships and the 2D histogram.
+//! - [`rank`]: histogram correlation and the bounded best-first list
+//!   (a leaf, used by `coarse` and `index`).
 //! - [`coarse`]: correlation against every site, candidate count N_C.
 //! - [`index`]: the optional tree over the sites' histograms that makes the
 //!   coarse ranking sublinear on large maps.
 //! - [`ssm`]: spectral scan matching against a candidate's reference scan.
 //! - [`refine`]: pose refinement against the map's distance field.
 //! - [`verify`]: the vicinity score.
+//! - [`select`]: the early stop, the choice of the answer, ambiguity and
+//!   acceptance.
 //! - [`raycast`]: exact grid traversal, shared with the compiler.
 //!
 //! Units: metres and radians (REP-103), `f32`.
@@ -54,8 +58,10 @@ pub mod math;
 pub mod params;
 pub mod pgr;
 pub mod prep;
+pub mod rank;
 pub mod raycast;
 pub mod refine;
+pub mod select;
 pub mod ssm;
 pub mod verify;
 
@@ -65,7 +71,8 @@ mod mmap;
 pub use db::{DbError, DbErrorKind, RefDb};
 pub use frame::{wrap_angle, MapFrame, Pose2};
 pub use localize::{
-    localize, scratch_size, Candidate, Localization, LocalizeError, RangeScan, Scan,
+    localize, scratch_size, Candidate, Localization, LocalizeError, Localizer, Prepared, RangeScan,
+    Scan,
 };
 #[cfg(feature = "mmap")]
 pub use mmap::{map_file, open_mmap, OpenError};

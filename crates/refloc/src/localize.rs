@@ -1,10 +1,10 @@
 //! The localizer: one scan in, a pose with its evidence out, using only the
 //! caller's scratch memory.
 //!
-//! Stages, each in its own module and measurable on its own:
-//! [`crate::prep`] → [`crate::pgr`] histogram → [`crate::coarse`] ranking →
-//! per candidate: [`crate::ssm`] → [`crate::refine`] (optional) →
-//! [`crate::verify`] → selection.
+//! Stages, each in its own module and callable on its own through
+//! [`Localizer`]: [`crate::prep`] → [`crate::pgr`] histogram →
+//! [`crate::coarse`] ranking → per candidate: [`crate::ssm`] →
+//! [`crate::refine`] (optional) → [`crate::verify`] → [`crate::select`].
 
 use core::fmt;
 
@@ -12,12 +12,16 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::coarse::{self, Ranked};
 use crate::db::RefDb;
-use crate::params::{Params, Selection};
+use crate::params::Params;
 use crate::prep;
+use crate::raycast::BitGrid;
 use crate::refine::{self, DistMap};
-use crate::ssm::{self, Affinity, SsmWork, DESC_LEN};
+use crate::select::{self, Next, Search};
+use crate::ssm::{self, SsmWork, DESC_LEN};
 use crate::verify;
 use crate::Pose2;
+
+pub use crate::select::{CONFIRM_MAX, CONFIRM_SKIP_RADIUS, EARLY_CONFIRM_GAMMA};
 
 /// The default of `Params::affinity_cap`: most affinity entries stored per
 /// SSM run (8 bytes each).
@@ -242,41 +246,12 @@ impl Dims {
         }
     }
 
-    /// (element count, element size, element alignment) of every array, in carve order.
-    fn arrays(&self) -> [(usize, usize, usize); 20] {
-        use core::mem::{align_of, size_of};
-        let f = (size_of::<f32>(), align_of::<f32>());
-        let p2 = (size_of::<[f32; 2]>(), align_of::<[f32; 2]>());
-        let u = |n: usize, t: (usize, usize)| (n, t.0, t.1);
-        [
-            u(self.beams, p2),
-            u(self.beams, f),
-            u(self.beams, f),
-            u(self.points, p2),
-            u(self.points, p2),
-            u(self.ref_beams, p2),
-            u(self.points, p2),
-            u(self.points, p2),
-            u(self.hist, f),
-            u(self.cands, (size_of::<Ranked>(), align_of::<Ranked>())),
-            u(
-                self.cands,
-                (size_of::<Candidate>(), align_of::<Candidate>()),
-            ),
-            u(self.points * DESC_LEN, f),
-            u(self.points * DESC_LEN, f),
-            u(self.tent, (size_of::<[u16; 2]>(), align_of::<[u16; 2]>())),
-            u(self.aff, (size_of::<Affinity>(), align_of::<Affinity>())),
-            u(self.tent, f),
-            u(self.tent, f),
-            u(self.tent, (2, 2)),
-            u(self.points, (size_of::<[u16; 2]>(), align_of::<[u16; 2]>())),
-            u(3 * self.points + self.tent, (1, 1)),
-        ]
-    }
-
+    /// Scratch bytes of these arrays: [`carve`] run against a counting arena.
     fn bytes(&self) -> usize {
-        self.arrays().iter().map(|&(n, s, a)| n * s + a - 1).sum()
+        let mut counter = Arena::counting();
+        // A counting arena hands out empty slices and never fails.
+        let _ = carve(self, &mut counter);
+        counter.counted
     }
 }
 
@@ -296,17 +271,43 @@ pub fn max_beams_for(params: &Params, bytes: usize) -> usize {
     (bytes - base) / per.max(1)
 }
 
+/// Hands out typed, aligned slices of a byte buffer, or (counting) only
+/// adds up the bytes that would take, with the worst-case alignment padding.
 struct Arena<'a> {
     buf: &'a mut [u8],
+    counting: bool,
+    counted: usize,
 }
 
 impl<'a> Arena<'a> {
+    fn over(buf: &'a mut [u8]) -> Arena<'a> {
+        Arena {
+            buf,
+            counting: false,
+            counted: 0,
+        }
+    }
+
+    fn counting() -> Arena<'a> {
+        Arena {
+            buf: &mut [],
+            counting: true,
+            counted: 0,
+        }
+    }
+
     fn take<T: FromBytes + IntoBytes + KnownLayout + Immutable>(
         &mut self,
         n: usize,
     ) -> Option<&'a mut [T]> {
+        let (size, align) = (core::mem::size_of::<T>(), core::mem::align_of::<T>());
+        if self.counting {
+            let bytes = n.saturating_mul(size).saturating_add(align - 1);
+            self.counted = self.counted.saturating_add(bytes);
+            return Some(Default::default());
+        }
         let buf = core::mem::take(&mut self.buf);
-        let pad = buf.as_ptr().align_offset(core::mem::align_of::<T>());
+        let pad = buf.as_ptr().align_offset(align);
         if pad > buf.len() {
             return None;
         }
@@ -314,6 +315,374 @@ impl<'a> Arena<'a> {
         let (slice, rest) = <[T]>::mut_from_prefix_with_elems(rest, n).ok()?;
         self.buf = rest;
         Some(slice)
+    }
+}
+
+/// The localizer's working arrays, carved from the scratch.
+struct Bufs<'a> {
+    /// The input scan: beam-ordered points (sensor frame, m), angles (rad)
+    /// and ranges (m, infinite = no return), counter-clockwise.
+    in_pts: &'a mut [[f32; 2]],
+    in_ang: &'a mut [f32],
+    in_rng: &'a mut [f32],
+    /// The prepared query: resampled points and tangents.
+    q_pts: &'a mut [[f32; 2]],
+    q_tan: &'a mut [[f32; 2]],
+    /// A candidate's reference scan: dense points, then prepared points and
+    /// tangents (the last two also serve the query histogram).
+    r_dense: &'a mut [[f32; 2]],
+    r_pts: &'a mut [[f32; 2]],
+    r_tan: &'a mut [[f32; 2]],
+    hist: &'a mut [f32],
+    top: &'a mut [Ranked],
+    cands: &'a mut [Candidate],
+    work: SsmWork<'a>,
+}
+
+/// The one description of the scratch layout: [`Dims::bytes`] runs it
+/// against a counting arena, [`Localizer::new`] against the buffer.
+fn carve<'a>(d: &Dims, ar: &mut Arena<'a>) -> Option<Bufs<'a>> {
+    Some(Bufs {
+        in_pts: ar.take(d.beams)?,
+        in_ang: ar.take(d.beams)?,
+        in_rng: ar.take(d.beams)?,
+        q_pts: ar.take(d.points)?,
+        q_tan: ar.take(d.points)?,
+        r_dense: ar.take(d.ref_beams)?,
+        r_pts: ar.take(d.points)?,
+        r_tan: ar.take(d.points)?,
+        hist: ar.take(d.hist)?,
+        top: ar.take(d.cands)?,
+        cands: ar.take(d.cands)?,
+        work: SsmWork {
+            qdesc: ar.take(d.points * DESC_LEN)?,
+            rdesc: ar.take(d.points * DESC_LEN)?,
+            tent: ar.take(d.tent)?,
+            aff: ar.take(d.aff)?,
+            x: ar.take(d.tent)?,
+            y: ar.take(d.tent)?,
+            order: ar.take(d.tent)?,
+            acc: ar.take(d.points)?,
+            flags: ar.take(3 * d.points + d.tent)?,
+        },
+    })
+}
+
+/// The least number of resampled query points the fine stage works with.
+pub const MIN_PREPARED_POINTS: usize = 8;
+
+/// What [`Localizer::prepare`] found in the scan.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Prepared {
+    /// Beams in the scan.
+    pub beams: usize,
+    /// Beams with a valid return.
+    pub valid: usize,
+    /// Angular coverage (rad).
+    pub fov: f32,
+    /// The scan closes a full turn.
+    pub wrap: bool,
+    /// The sensor's maximum range (m), bound of the verification's beams.
+    pub range_max: f32,
+    /// Resampled query points.
+    pub points: usize,
+}
+
+/// One query, stage by stage, in the caller's scratch memory:
+/// [`Localizer::new`] carves the scratch, [`Localizer::prepare`] loads a
+/// scan, [`Localizer::rank`] runs the coarse stage, [`Localizer::examine`]
+/// runs the fine stage on one candidate, and [`Localizer::select`] gives the
+/// answer. [`localize`] is those calls in order, with the candidate search
+/// of [`crate::select::Search`]; each stage can also be called (and
+/// measured) on its own.
+pub struct Localizer<'d, 's, D: AsRef<[u8]>> {
+    db: &'d RefDb<D>,
+    params: &'d Params,
+    b: Bufs<'s>,
+    dm: DistMap<'d>,
+    grid: BitGrid<'d>,
+    scan: Prepared,
+    window: Option<usize>,
+    cells: usize,
+    ranked: usize,
+    nc: usize,
+}
+
+impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
+    /// Carves `scratch` for scans of up to `max_beams` beams against `db`.
+    ///
+    /// A scratch too small gives [`LocalizeError::TooManyBeams`] (with the
+    /// beam count it can take) when it can take some scan, else
+    /// [`LocalizeError::ScratchTooSmall`].
+    pub fn new(
+        db: &'d RefDb<D>,
+        scratch: &'s mut [u8],
+        max_beams: usize,
+    ) -> Result<Self, LocalizeError> {
+        let params = db.params();
+        let dims = Dims::new(params, max_beams);
+        let needed = dims.bytes();
+        let got = scratch.len();
+        if got < needed {
+            let cap = max_beams_for(params, got);
+            if cap < max_beams && scratch_size(params, 0) <= got {
+                return Err(LocalizeError::TooManyBeams {
+                    beams: max_beams,
+                    capacity: cap,
+                });
+            }
+            return Err(LocalizeError::ScratchTooSmall { needed, got });
+        }
+        // `needed` includes the worst-case padding of every array, so this
+        // cannot fail; if it did, the error still tells the truth.
+        let b = carve(&dims, &mut Arena::over(scratch))
+            .ok_or(LocalizeError::ScratchTooSmall { needed, got })?;
+        Ok(Localizer {
+            db,
+            params,
+            b,
+            dm: DistMap::of(db),
+            grid: db.grid(),
+            scan: Prepared::default(),
+            window: None,
+            cells: 0,
+            ranked: 0,
+            nc: 0,
+        })
+    }
+
+    /// Stage 1: loads `scan` (beam-ordered points, counter-clockwise),
+    /// resamples it and computes the query's SSM descriptors.
+    pub fn prepare(&mut self, scan: &Scan<'_>) -> Result<Prepared, LocalizeError> {
+        let b = &mut self.b;
+        let params = self.params;
+        let n = scan.len();
+        let (valid, fov, wrap, range_max) = load_scan(scan, b.in_pts, b.in_ang, b.in_rng)?;
+        let needed = params.min_valid_points as usize;
+        if valid < needed {
+            return Err(LocalizeError::NotEnoughPoints { valid, needed });
+        }
+        let nq = prep::prepare(&b.in_pts[..n], wrap, params, b.q_pts, b.q_tan);
+        if nq < MIN_PREPARED_POINTS {
+            return Err(LocalizeError::NotEnoughPoints {
+                valid: nq,
+                needed: MIN_PREPARED_POINTS,
+            });
+        }
+        ssm::descriptors(
+            &b.q_pts[..nq],
+            &b.q_tan[..nq],
+            params.desc_radius,
+            b.work.qdesc,
+        );
+        self.scan = Prepared {
+            beams: n,
+            valid,
+            fov,
+            wrap,
+            range_max,
+            points: nq,
+        };
+        self.nc = 0;
+        Ok(self.scan)
+    }
+
+    /// The coarse histogram of the prepared scan (of a window matching a
+    /// partial field of view); returns its cell count.
+    pub fn histogram(&mut self) -> usize {
+        let b = &mut self.b;
+        let s = &self.scan;
+        let (window, cells) = coarse::query_histogram(
+            &b.in_pts[..s.beams],
+            s.fov,
+            s.wrap,
+            self.params,
+            b.r_pts,
+            b.r_tan,
+            b.hist,
+        );
+        self.window = window;
+        self.cells = cells;
+        cells
+    }
+
+    /// Ranks the sites by the histogram of [`Localizer::histogram`] and
+    /// applies the N_C rule; returns N_C, the candidates to examine.
+    pub fn rank_sites(&mut self) -> usize {
+        let p = self.params;
+        let b = &mut self.b;
+        self.ranked = coarse::rank_sites(self.db, &b.hist[..self.cells], self.window, b.top);
+        self.nc = coarse::candidate_count(
+            &b.top[..self.ranked],
+            p.nc_min as usize,
+            p.nc_max as usize,
+            p.nc_margin,
+        );
+        self.nc
+    }
+
+    /// Stage 2, the coarse stage: [`Localizer::histogram`] then
+    /// [`Localizer::rank_sites`]. Returns N_C.
+    pub fn rank(&mut self) -> usize {
+        self.histogram();
+        self.rank_sites()
+    }
+
+    /// The coarse candidates, best first (N_C of them after
+    /// [`Localizer::rank`]).
+    pub fn ranked(&self) -> &[Ranked] {
+        &self.b.top[..self.nc]
+    }
+
+    /// The candidates recorded by [`Localizer::examine`] and
+    /// [`Localizer::skip`], the first `n` (at most N_C).
+    pub fn candidates(&self, n: usize) -> &[Candidate] {
+        &self.b.cands[..n.min(self.nc)]
+    }
+
+    /// SSM of the prepared scan against `site`'s reference scan: the site's
+    /// ranges to points, their preparation and descriptors, the match.
+    pub fn match_site(&mut self, site: usize) -> Option<ssm::SsmResult> {
+        let p = self.params;
+        let s = &p.sensor;
+        let b = &mut self.b;
+        let n = prep::ranges_to_points(
+            self.db.scan(site),
+            s.angle_min,
+            s.angle_increment,
+            s.range_min,
+            s.range_max,
+            b.r_dense,
+        );
+        let ref_wrap = prep::covers_full_turn(s.angle_increment, s.beams as usize);
+        let nr = prep::prepare(&b.r_dense[..n], ref_wrap, p, b.r_pts, b.r_tan);
+        ssm::descriptors(&b.r_pts[..nr], &b.r_tan[..nr], p.desc_radius, b.work.rdesc);
+        let nq = self.scan.points;
+        ssm::match_scans(
+            &b.q_pts[..nq],
+            &b.q_tan[..nq],
+            &b.r_pts[..nr],
+            &b.r_tan[..nr],
+            p,
+            &mut b.work,
+        )
+    }
+
+    /// The sensor pose (map frame) an SSM result against `site` gives.
+    pub fn sensor_pose(&self, site: usize, m: &ssm::SsmResult) -> Pose2 {
+        let sxy = self.db.site_xy(site);
+        Pose2::new(sxy[0], sxy[1], 0.0).compose(&m.pose)
+    }
+
+    /// Refinement of a sensor pose against the map's distance field (the
+    /// pose itself when the database sets no refinement).
+    pub fn refine_pose(&self, sensor: Pose2) -> Pose2 {
+        let p = self.params;
+        if p.refine_iters == 0 {
+            return sensor;
+        }
+        let pts = &self.b.in_pts[..self.scan.beams];
+        refine::refine(&self.dm, pts, sensor, p.refine_iters, p.refine_max_dist).0
+    }
+
+    /// The vicinity score of a sensor pose (map frame) for the prepared scan.
+    pub fn verify_pose(&self, sensor: &Pose2) -> verify::Vicinity {
+        let verifier = verify::Verifier::new(self.db, &self.grid, self.scan.range_max);
+        let n = self.scan.beams;
+        let beams = self.b.in_ang[..n].iter().copied();
+        verifier.score(sensor, beams.zip(self.b.in_rng[..n].iter().copied()))
+    }
+
+    /// Stage 3, the fine stage on coarse candidate `c`: SSM against its
+    /// site, refinement, verification. Records and returns the candidate
+    /// (`has_pose` 0 when SSM found no pose); `None` when `c` is not below
+    /// N_C of the last [`Localizer::rank`].
+    pub fn examine(&mut self, c: usize) -> Option<Candidate> {
+        let r = *self.b.top[..self.nc].get(c)?;
+        let site = r.site as usize;
+        let mut cand = unexamined(c, &r);
+        if let Some(m) = self.match_site(site) {
+            let sensor = self.refine_pose(self.sensor_pose(site, &m));
+            let v = self.verify_pose(&sensor);
+            let p = self.params;
+            let robot = sensor.compose(&p.sensor.offset.inverse());
+            cand = Candidate {
+                match_score: m.score,
+                matched: m.matched,
+                inliers: m.inliers,
+                x: robot.x,
+                y: robot.y,
+                theta: robot.theta,
+                vicinity: v.score,
+                vicinity_threshold: v.threshold,
+                has_pose: 1,
+                short_beams: v.short,
+                long_beams: v.long,
+                pairs: v.pairs,
+                through_beams: v.through,
+                free_space_ok: v.free_space_ok(p.through_max) as u32,
+                evidence: v.evidence(p.short_weight, p.occlusion_fit),
+                ..cand
+            };
+        }
+        self.b.cands[c] = cand;
+        Some(cand)
+    }
+
+    /// Records coarse candidate `c` (below N_C; others are ignored) as not
+    /// examined (no pose).
+    pub fn skip(&mut self, c: usize) {
+        if c < self.nc {
+            self.b.cands[c] = unexamined(c, &self.b.top[c]);
+        }
+    }
+
+    /// Stage 4: the answer among the first `examined` candidates, with the
+    /// best one `search` found, its ambiguity and acceptance
+    /// ([`crate::select`]).
+    pub fn select(
+        self,
+        search: &Search,
+        examined: usize,
+    ) -> Result<Localization<'s>, LocalizeError> {
+        let nc = examined.min(self.nc);
+        let cands: &'s [Candidate] = &self.b.cands[..nc];
+        let best = search.best().filter(|&b| b < nc);
+        let c = best
+            .map(|b| cands[b])
+            .ok_or(LocalizeError::NoMatch { candidates: nc })?;
+        let pose = Pose2::new(c.x, c.y, c.theta);
+        let ambiguous = select::ambiguous(cands, &c, self.params.ambiguity_ratio);
+        Ok(Localization {
+            pose,
+            sensor_pose: pose.compose(&self.params.sensor.offset),
+            site: c.site,
+            coarse_rank: c.rank,
+            gamma: c.gamma,
+            match_score: c.match_score,
+            inliers: c.inliers,
+            vicinity: c.vicinity,
+            vicinity_threshold: c.vicinity_threshold,
+            evidence: c.evidence,
+            accepted: select::accepted(&c, ambiguous),
+            ambiguous,
+            valid_points: self.scan.valid as u32,
+            short_beams: c.short_beams,
+            long_beams: c.long_beams,
+            through_beams: c.through_beams,
+            free_space_ok: c.free_space_ok != 0,
+            candidates: cands,
+        })
+    }
+}
+
+/// A candidate record before (or without) the fine stage.
+fn unexamined(c: usize, r: &Ranked) -> Candidate {
+    Candidate {
+        site: r.site,
+        rank: c as u32,
+        gamma: r.gamma,
+        ..Candidate::default()
     }
 }
 
@@ -329,271 +698,29 @@ pub fn localize<'s, D: AsRef<[u8]>>(
     scan: &Scan<'_>,
     scratch: &'s mut [u8],
 ) -> Result<Localization<'s>, LocalizeError> {
-    let params = db.params();
-    let n_beams = scan.len();
-    let dims = Dims::new(params, n_beams);
-    let needed = dims.bytes();
-    if scratch.len() < needed {
-        let cap = max_beams_for(params, scratch.len());
-        if cap < n_beams && scratch_size(params, 0) <= scratch.len() {
-            return Err(LocalizeError::TooManyBeams {
-                beams: n_beams,
-                capacity: cap,
-            });
-        }
-        return Err(LocalizeError::ScratchTooSmall {
-            needed,
-            got: scratch.len(),
-        });
-    }
-    let mut ar = Arena { buf: scratch };
-    let oom = LocalizeError::ScratchTooSmall {
-        needed,
-        got: needed,
-    };
-    macro_rules! take {
-        ($t:ty, $n:expr) => {
-            ar.take::<$t>($n).ok_or(oom)?
-        };
-    }
-    let in_pts = take!([f32; 2], dims.beams);
-    let in_ang = take!(f32, dims.beams);
-    let in_rng = take!(f32, dims.beams);
-    let q_pts = take!([f32; 2], dims.points);
-    let q_tan = take!([f32; 2], dims.points);
-    let r_dense = take!([f32; 2], dims.ref_beams);
-    let r_pts = take!([f32; 2], dims.points);
-    let r_tan = take!([f32; 2], dims.points);
-    let hist = take!(f32, dims.hist);
-    let top = take!(Ranked, dims.cands);
-    let cands = take!(Candidate, dims.cands);
-    let mut work = SsmWork {
-        qdesc: take!(f32, dims.points * DESC_LEN),
-        rdesc: take!(f32, dims.points * DESC_LEN),
-        tent: take!([u16; 2], dims.tent),
-        aff: take!(Affinity, dims.aff),
-        x: take!(f32, dims.tent),
-        y: take!(f32, dims.tent),
-        order: take!(u16, dims.tent),
-        acc: take!([u16; 2], dims.points),
-        flags: take!(u8, 3 * dims.points + dims.tent),
-    };
-
-    // 1. Input scan to beam-ordered points, counter-clockwise.
-    let (valid, fov, wrap, range_max) = load_scan(scan, in_pts, in_ang, in_rng)?;
-    let needed_pts = params.min_valid_points as usize;
-    if valid < needed_pts {
-        return Err(LocalizeError::NotEnoughPoints {
-            valid,
-            needed: needed_pts,
-        });
-    }
-    let in_pts = &in_pts[..n_beams];
-    let nq = prep::prepare(in_pts, wrap, params, q_pts, q_tan);
-    if nq < 8 {
-        return Err(LocalizeError::NotEnoughPoints {
-            valid: nq,
-            needed: 8,
-        });
-    }
-    let (q_pts, q_tan) = (&q_pts[..nq], &q_tan[..nq]);
-
-    // 2. Coarse: histogram (of a window matching a partial field of view)
-    //    and ranking. The reference buffers are free until the fine stage.
-    let (window, cells) = coarse::query_histogram(in_pts, fov, wrap, params, r_pts, r_tan, hist);
-    let hist = &hist[..cells];
-    let ranked = coarse::rank_sites(db, hist, window, top);
-    let nc = coarse::candidate_count(
-        &top[..ranked],
-        params.nc_min as usize,
-        params.nc_max as usize,
-        params.nc_margin,
-    );
-
-    // 3. Fine: SSM against each candidate, refine, verify.
-    ssm::descriptors(q_pts, q_tan, params.desc_radius, work.qdesc);
-    let s = &params.sensor;
-    let ref_wrap = prep::covers_full_turn(s.angle_increment, s.beams as usize);
-    let dm = DistMap::of(db);
-    let grid = db.grid();
-    let verifier = verify::Verifier::new(db, &grid, range_max);
-    let offset_inv = s.offset.inverse();
-    let mut best: Option<usize> = None;
+    let mut loc = Localizer::new(db, scratch, scan.len())?;
+    loc.prepare(scan)?;
+    let nc = loc.rank();
+    let mut search = Search::new(db.params());
     let mut examined = nc;
-    // Set by the early stop: the coarse score below which the search ends.
-    let mut confirm_floor: Option<f32> = None;
-    let mut confirmed = 0usize;
-    for (c, r) in top[..nc].iter().enumerate() {
-        let site = r.site as usize;
-        let mut cand = Candidate {
-            site: r.site,
-            rank: c as u32,
-            gamma: r.gamma,
-            ..Candidate::default()
-        };
-        if let (Some(floor), Some(b)) = (confirm_floor, best) {
-            if r.gamma < floor || confirmed >= CONFIRM_MAX {
+    for c in 0..nc {
+        let r = loc.ranked()[c];
+        let site_xy = db.site_xy(r.site as usize);
+        match search.next(r.gamma, site_xy, loc.candidates(c)) {
+            Next::Stop => {
                 examined = c;
                 break;
             }
-            // A site near the best pose would only find that pose again.
-            let sxy = db.site_xy(site);
-            let (dx, dy) = (sxy[0] - cands[b].x, sxy[1] - cands[b].y);
-            if dx * dx + dy * dy < CONFIRM_SKIP_RADIUS * CONFIRM_SKIP_RADIUS {
-                cands[c] = cand;
-                continue;
-            }
-            confirmed += 1;
-        }
-        let n = prep::ranges_to_points(
-            db.scan(site),
-            s.angle_min,
-            s.angle_increment,
-            s.range_min,
-            s.range_max,
-            r_dense,
-        );
-        let nr = prep::prepare(&r_dense[..n], ref_wrap, params, r_pts, r_tan);
-        ssm::descriptors(&r_pts[..nr], &r_tan[..nr], params.desc_radius, work.rdesc);
-        if let Some(m) =
-            ssm::match_scans(q_pts, q_tan, &r_pts[..nr], &r_tan[..nr], params, &mut work)
-        {
-            let sxy = db.site_xy(site);
-            let mut sensor = Pose2::new(sxy[0], sxy[1], 0.0).compose(&m.pose);
-            if params.refine_iters > 0 {
-                sensor = refine::refine(
-                    &dm,
-                    in_pts,
-                    sensor,
-                    params.refine_iters,
-                    params.refine_max_dist,
-                )
-                .0;
-            }
-            let v = verifier.score(
-                &sensor,
-                in_ang
-                    .iter()
-                    .copied()
-                    .zip(in_rng.iter().copied())
-                    .take(n_beams),
-            );
-            let free_ok = v.free_space_ok(params.through_max);
-            let robot = sensor.compose(&offset_inv);
-            cand.match_score = m.score;
-            cand.matched = m.matched;
-            cand.inliers = m.inliers;
-            cand.x = robot.x;
-            cand.y = robot.y;
-            cand.theta = robot.theta;
-            cand.vicinity = v.score;
-            cand.vicinity_threshold = v.threshold;
-            cand.has_pose = 1;
-            cand.short_beams = v.short;
-            cand.long_beams = v.long;
-            cand.pairs = v.pairs;
-            cand.through_beams = v.through;
-            cand.free_space_ok = free_ok as u32;
-            cand.evidence = v.evidence(params.short_weight, params.occlusion_fit);
-            // A pose that passes the free-space check beats one that fails it.
-            let better = match best {
-                None => true,
-                Some(b) if cands[b].free_space_ok != cand.free_space_ok => free_ok,
-                Some(b) => match params.selection {
-                    Selection::MatchScore => cand.match_score > cands[b].match_score,
-                    Selection::Vicinity => cand.evidence > cands[b].evidence,
-                },
-            };
-            if better {
-                best = Some(c);
-            }
-            // Early stop (vicinity selection): a confident match (the beams
-            // not blocked by something unmapped in front agree with the map
-            // almost perfectly, at most a fifth are blocked, and M passes the
-            // acceptance threshold), or enough candidates examined and an
-            // acceptable best.
-            let best_ok = best
-                .map(|b| {
-                    let bc = if b == c { &cand } else { &cands[b] };
-                    bc.free_space_ok != 0 && bc.evidence > v.threshold
-                })
-                .unwrap_or(false);
-            let done = params.selection == Selection::Vicinity
-                && params.early_accept > 0.0
-                && ((v.explained_ratio() >= params.early_accept
-                    && v.short * 5 <= v.pairs
-                    && cand.evidence > v.threshold
-                    && free_ok)
-                    || (params.early_min > 0 && c + 1 >= params.early_min as usize && best_ok));
-            cands[c] = cand;
-            // Before stopping, examine the sites the coarse stage rates
-            // nearly as high as this one (within EARLY_CONFIRM_GAMMA): a
-            // twin place (a symmetric or repeated part of the map) ranks
-            // there, and the ambiguity test sees only what was examined.
-            if done && confirm_floor.is_none() {
-                confirm_floor = Some(r.gamma - EARLY_CONFIRM_GAMMA);
+            Next::Skip => loc.skip(c),
+            Next::Examine => {
+                if loc.examine(c).is_some_and(|e| e.has_pose != 0) {
+                    search.record(loc.candidates(c + 1), r.gamma);
+                }
             }
         }
-        cands[c] = cand;
     }
-    let nc = examined.min(nc);
-    let cands = &cands[..nc];
-    let b = best.ok_or(LocalizeError::NoMatch { candidates: nc })?;
-    let c = cands[b];
-    let pose = Pose2::new(c.x, c.y, c.theta);
-    // Ambiguity: another examined candidate far from this pose that explains
-    // the scan almost as well (and passes the free-space check: a pose
-    // that sees through walls is no alternative).
-    let ambiguous = params.ambiguity_ratio > 0.0
-        && cands.iter().any(|o| {
-            let far = (o.x - c.x) * (o.x - c.x) + (o.y - c.y) * (o.y - c.y) > 1.0
-                || libm::fabsf(crate::wrap_angle(o.theta - c.theta)) > 0.349_066; // 20 degrees
-            o.has_pose != 0
-                && o.free_space_ok != 0
-                && far
-                && o.evidence >= params.ambiguity_ratio * c.evidence
-        });
-    let free_ok = c.free_space_ok != 0;
-    Ok(Localization {
-        pose,
-        sensor_pose: pose.compose(&s.offset),
-        site: c.site,
-        coarse_rank: c.rank,
-        gamma: c.gamma,
-        match_score: c.match_score,
-        inliers: c.inliers,
-        vicinity: c.vicinity,
-        vicinity_threshold: c.vicinity_threshold,
-        evidence: c.evidence,
-        accepted: c.evidence > c.vicinity_threshold && free_ok && !ambiguous,
-        ambiguous,
-        valid_points: valid as u32,
-        short_beams: c.short_beams,
-        long_beams: c.long_beams,
-        through_beams: c.through_beams,
-        free_space_ok: free_ok,
-        candidates: cands,
-    })
+    loc.select(&search, examined)
 }
-
-/// After the early stop's condition holds at a candidate of coarse score
-/// gamma, the candidates still to come with a score of at least
-/// `gamma - EARLY_CONFIRM_GAMMA` are examined too (ranked by gamma, they are
-/// the next ones), except those whose site lies within
-/// [`CONFIRM_SKIP_RADIUS`] of the best pose so far. Measured on a symmetric
-/// map (tb3-world, 200 static 360-degree poses): the twin site ranks within
-/// 0.02 of the one that stopped the search; without the confirmation 15.5%
-/// of the poses were accepted at the twin, with it none (docs/ssm.md,
-/// "Early stop and its confirmation").
-pub const EARLY_CONFIRM_GAMMA: f32 = 0.05;
-
-/// Confirmation after the early stop skips candidate sites closer than this
-/// (m) to the best pose so far: their match would find the same pose, and
-/// the ambiguity test looks for poses over 1 m away.
-pub const CONFIRM_SKIP_RADIUS: f32 = 2.0;
-
-/// Most candidates the confirmation after the early stop examines.
-pub const CONFIRM_MAX: usize = 6;
 
 /// Fills dense points, beam angles and ranges in counter-clockwise order.
 /// Returns (valid count, angular coverage in rad, closes a full turn, range_max).

@@ -208,7 +208,7 @@ impl Params {
             win_theta_bins: 12,
             early_min: 0,
             ambiguity_ratio: 0.97,
-            affinity_cap: 16 * 1024,
+            affinity_cap: crate::localize::AFFINITY_CAP as u32,
             through_max: 0.01,
             through_excess: 0.5,
             short_weight: 1.0,

@@ -18,6 +18,15 @@
 //! pose error is large but whose endpoint still lies on the surface.
 
 use crate::raycast::{cast, BitGrid, Occupancy};
+
+/// The most a beam adds to the vicinity score M: `m = HIT_SCORE - d^2 /
+/// (2 sigma_d^2)` for a beam whose range is off by `d` (paper eq. 23, where
+/// the constant is 4.5 = (3 sigma_d)^2 / (2 sigma_d^2), so that m falls to
+/// 0 at the cut-off d = 3 sigma_d).
+pub const HIT_SCORE: f32 = 4.5;
+
+/// Beams count as fitting the map within this many sigma_d (paper eq. 23).
+pub const FIT_SIGMAS: f32 = 3.0;
 use crate::refine::DistMap;
 use crate::{MapFrame, Pose2, RefDb};
 
@@ -49,14 +58,25 @@ pub struct Vicinity {
 
 impl Vicinity {
     /// M over its maximum for the beams that are not short:
-    /// `M / (4.5 (N_P - short))`, 0 when every beam is short.
+    /// `M / (HIT_SCORE (N_P - short))`, 0 when every beam is short.
     pub fn explained_ratio(&self) -> f32 {
-        let n = self.pairs.saturating_sub(self.short);
-        if n == 0 {
-            0.0
-        } else {
-            self.score / (4.5 * n as f32)
-        }
+        ratio(self.score, self.pairs.saturating_sub(self.short))
+    }
+
+    /// The vicinity ratio: M over its maximum, `M / (HIT_SCORE N_P)`, 0
+    /// with no beams.
+    pub fn vicinity_ratio(&self) -> f32 {
+        ratio(self.score, self.pairs)
+    }
+}
+
+/// `m / (HIT_SCORE n)`: a vicinity score as a share of its maximum over
+/// `n` beams, 0 when `n` is 0.
+pub fn ratio(m: f32, n: u32) -> f32 {
+    if n == 0 {
+        0.0
+    } else {
+        m / (HIT_SCORE * n as f32)
     }
 }
 
@@ -74,7 +94,7 @@ pub struct Verifier<'a, G: Occupancy + ?Sized> {
     pub range_max: f32,
     /// sigma_d (m).
     pub sigma_d: f32,
-    /// Accept when `M > 4.5 N_P accept_ratio`.
+    /// Accept when `M > HIT_SCORE N_P accept_ratio`.
     pub accept_ratio: f32,
     /// Least excess range (m) of a beam through a wall.
     pub through_excess: f32,
@@ -108,7 +128,7 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
         let frame = &self.frame;
         let uv = frame.to_cells([sensor.x, sensor.y]);
         let max_cells = self.range_max / frame.resolution;
-        let lim = 3.0 * self.sigma_d;
+        let lim = FIT_SIGMAS * self.sigma_d;
         let inv = 1.0 / (2.0 * self.sigma_d * self.sigma_d);
         let mut m = 0.0f32;
         let mut n = 0u32;
@@ -130,7 +150,7 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
                     let v = t * frame.resolution;
                     let d = libm::fabsf(v - r);
                     if d < lim {
-                        m += 4.5 - d * d * inv;
+                        m += HIT_SCORE - d * d * inv;
                     } else if r < v {
                         short += 1;
                     } else {
@@ -163,7 +183,7 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
         }
         Vicinity {
             score: m,
-            threshold: 4.5 * n as f32 * self.accept_ratio,
+            threshold: HIT_SCORE * n as f32 * self.accept_ratio,
             pairs: n,
             short,
             long,
@@ -177,7 +197,7 @@ impl Vicinity {
     /// short fit the map at least `occlusion_fit` well
     /// ([`Vicinity::explained_ratio`]; the short beams are then taken for
     /// unmapped things in front, people and clutter), else
-    /// `M - 4.5 short_weight short`: each beam that ends in front of where
+    /// `M - HIT_SCORE short_weight short`: each beam that ends in front of where
     /// the map has a surface costs a share of a hit's weight, as it does on
     /// a wrong map, where the rest of the scan fits only loosely.
     /// `short_weight` 0 gives the paper's M.
@@ -185,7 +205,7 @@ impl Vicinity {
         if occlusion_fit > 0.0 && self.explained_ratio() >= occlusion_fit {
             self.score
         } else {
-            self.score - 4.5 * short_weight * self.short as f32
+            self.score - HIT_SCORE * short_weight * self.short as f32
         }
     }
 

@@ -230,7 +230,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             let grid = db.grid();
             let v = refloc::verify::Verifier::new(&db, &grid, rmax)
                 .score(sensor, beams.iter().copied());
-            (v.score / (4.5 * v.pairs.max(1) as f32)) as f64
+            v.vicinity_ratio() as f64
         };
         let truth_fit = truth_sensor.as_ref().map(fit);
         // The given truth corrected locally against the map with the scan's
@@ -263,7 +263,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                         errs.extend(err.map(|(e, _)| e));
                     } else if l.accepted {
                         false_acc += 1;
-                        let ours = (l.vicinity / (4.5 * l.valid_points.max(1) as f32)) as f64;
+                        let ours = refloc::verify::ratio(l.vicinity, l.valid_points) as f64;
                         if truth_fit.is_some_and(|t| t < ours - 0.2) {
                             false_acc_truth_fits_worse += 1;
                         }

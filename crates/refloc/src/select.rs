@@ -1,0 +1,348 @@
+//! Candidate selection and acceptance: which coarse candidates the fine
+//! stage examines (the early stop and its confirmation), which examined
+//! candidate is the answer, whether another one makes it ambiguous, and
+//! whether it is accepted.
+//!
+//! Everything here works on [`Candidate`] records alone (no database, no
+//! scan), so each rule can be tested on constructed cases.
+
+use crate::localize::Candidate;
+use crate::params::{Params, Selection};
+use crate::verify;
+
+/// After the early stop's condition holds at a candidate of coarse score
+/// gamma, the candidates still to come with a score of at least
+/// `gamma - EARLY_CONFIRM_GAMMA` are examined too (ranked by gamma, they are
+/// the next ones), except those whose site lies within
+/// [`CONFIRM_SKIP_RADIUS`] of the best pose so far. Measured on a symmetric
+/// map (tb3-world, 200 static 360-degree poses): the twin site ranks within
+/// 0.02 of the one that stopped the search; without the confirmation 15.5%
+/// of the poses were accepted at the twin, with it none (docs/ssm.md,
+/// "Early stop and its confirmation").
+pub const EARLY_CONFIRM_GAMMA: f32 = 0.05;
+
+/// Confirmation after the early stop skips candidate sites closer than this
+/// (m) to the best pose so far: their match would find the same pose, and
+/// the ambiguity test looks for poses over [`DISTINCT_DISTANCE`] away.
+pub const CONFIRM_SKIP_RADIUS: f32 = 2.0;
+
+/// Most candidates the confirmation after the early stop examines.
+pub const CONFIRM_MAX: usize = 6;
+
+/// Two poses are distinct alternatives when their positions differ by more
+/// than this (m) ...
+pub const DISTINCT_DISTANCE: f32 = 1.0;
+
+/// ... or their headings by more than this (rad, 20 degrees). Both are the
+/// scale of a different place or a turned match, well beyond the localizer's
+/// error on a right match (millimetres, tenths of a degree: docs/results.md).
+pub const DISTINCT_HEADING: f32 = 20.0 * core::f32::consts::PI / 180.0;
+
+/// The early stop's confident match: at most one beam in this many is
+/// short (blocked by something unmapped in front).
+pub const EARLY_SHORT_SHARE: u32 = 5;
+
+/// True when the poses of `a` and `b` are distinct alternatives (see
+/// [`DISTINCT_DISTANCE`], [`DISTINCT_HEADING`]).
+pub fn distinct(a: &Candidate, b: &Candidate) -> bool {
+    let (dx, dy) = (a.x - b.x, a.y - b.y);
+    dx * dx + dy * dy > DISTINCT_DISTANCE * DISTINCT_DISTANCE
+        || libm::fabsf(crate::wrap_angle(a.theta - b.theta)) > DISTINCT_HEADING
+}
+
+/// True when candidate `a` (with a pose) is a better answer than `b`: a
+/// pose that passes the free-space check beats one that fails it; then the
+/// larger matching score E ([`Selection::MatchScore`]) or evidence
+/// ([`Selection::Vicinity`]) wins, the earlier candidate on a tie.
+pub fn better(a: &Candidate, b: &Candidate, selection: Selection) -> bool {
+    if a.free_space_ok != b.free_space_ok {
+        return a.free_space_ok != 0;
+    }
+    match selection {
+        Selection::MatchScore => a.match_score > b.match_score,
+        Selection::Vicinity => a.evidence > b.evidence,
+    }
+}
+
+/// `M / (`[`verify::HIT_SCORE`]` (N_P - short))` of a candidate: how well the beams that
+/// are not blocked by something unmapped fit the map (0 when all are).
+pub fn explained_ratio(c: &Candidate) -> f32 {
+    verify::ratio(c.vicinity, c.pairs.saturating_sub(c.short_beams))
+}
+
+/// True when `c` passes the acceptance threshold and the free-space check.
+pub fn passes(c: &Candidate) -> bool {
+    c.has_pose != 0 && c.free_space_ok != 0 && c.evidence > c.vicinity_threshold
+}
+
+/// What to do with the next coarse candidate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Next {
+    /// Run the fine stage on it.
+    Examine,
+    /// Skip it (its site is near the best pose: it would find that pose
+    /// again); it stays in the list without a pose.
+    Skip,
+    /// Stop: it and the candidates after it are not examined.
+    Stop,
+}
+
+/// The fine stage's search over the ranked candidates: the best answer so
+/// far and the early stop's state.
+///
+/// Early stop ([`Selection::Vicinity`], `early_accept` > 0): after a
+/// confident match (the beams not blocked by something unmapped fit the map
+/// at least `early_accept` well, at most one in [`EARLY_SHORT_SHARE`] is
+/// blocked, and the pose passes), or after `early_min` candidates with a
+/// passing best, the search examines the candidates the coarse stage rates
+/// within [`EARLY_CONFIRM_GAMMA`] of the one that stopped it (a twin place
+/// ranks there, and the ambiguity test sees only what was examined), at
+/// most [`CONFIRM_MAX`] of them, skipping those near the best pose.
+#[derive(Clone, Copy, Debug)]
+pub struct Search {
+    selection: Selection,
+    early_accept: f32,
+    early_min: usize,
+    best: Option<usize>,
+    /// Set by the early stop: the coarse score below which the search ends.
+    floor: Option<f32>,
+    confirmed: usize,
+}
+
+impl Search {
+    /// A search with the database's selection and early-stop settings.
+    pub fn new(params: &Params) -> Search {
+        Search {
+            selection: params.selection,
+            early_accept: params.early_accept,
+            early_min: params.early_min as usize,
+            best: None,
+            floor: None,
+            confirmed: 0,
+        }
+    }
+
+    /// The index of the best candidate recorded so far.
+    pub fn best(&self) -> Option<usize> {
+        self.best
+    }
+
+    /// True once the early stop's condition has held.
+    pub fn stopping(&self) -> bool {
+        self.floor.is_some()
+    }
+
+    /// Decides on the next candidate, of coarse score `gamma` and site
+    /// position `site_xy` (map frame, m), given the candidates so far.
+    pub fn next(&mut self, gamma: f32, site_xy: [f32; 2], cands: &[Candidate]) -> Next {
+        let (Some(floor), Some(b)) = (self.floor, self.best) else {
+            return Next::Examine;
+        };
+        if gamma < floor || self.confirmed >= CONFIRM_MAX {
+            return Next::Stop;
+        }
+        let (dx, dy) = (site_xy[0] - cands[b].x, site_xy[1] - cands[b].y);
+        if dx * dx + dy * dy < CONFIRM_SKIP_RADIUS * CONFIRM_SKIP_RADIUS {
+            return Next::Skip;
+        }
+        self.confirmed += 1;
+        Next::Examine
+    }
+
+    /// Records candidate `c` (the last of `cands`, which holds every
+    /// candidate so far) after the fine stage gave it a pose, with its
+    /// coarse score `gamma`.
+    pub fn record(&mut self, cands: &[Candidate], gamma: f32) {
+        let Some(c) = cands.len().checked_sub(1) else {
+            return;
+        };
+        let cand = &cands[c];
+        if self
+            .best
+            .is_none_or(|b| better(cand, &cands[b], self.selection))
+        {
+            self.best = Some(c);
+        }
+        let best_ok = self.best.is_some_and(|b| {
+            let bc = &cands[b];
+            bc.free_space_ok != 0 && bc.evidence > bc.vicinity_threshold
+        });
+        let confident = explained_ratio(cand) >= self.early_accept
+            && cand.short_beams * EARLY_SHORT_SHARE <= cand.pairs
+            && cand.evidence > cand.vicinity_threshold
+            && cand.free_space_ok != 0;
+        let done = self.selection == Selection::Vicinity
+            && self.early_accept > 0.0
+            && (confident || (self.early_min > 0 && c + 1 >= self.early_min && best_ok));
+        if done && self.floor.is_none() {
+            self.floor = Some(gamma - EARLY_CONFIRM_GAMMA);
+        }
+    }
+}
+
+/// True when another examined candidate with a pose that passes the
+/// free-space check, distinct from `best` ([`distinct`]), has an evidence of
+/// at least `ratio` times the best's (`ratio` 0 disables the test).
+pub fn ambiguous(cands: &[Candidate], best: &Candidate, ratio: f32) -> bool {
+    ratio > 0.0
+        && cands.iter().any(|o| {
+            o.has_pose != 0
+                && o.free_space_ok != 0
+                && distinct(o, best)
+                && o.evidence >= ratio * best.evidence
+        })
+}
+
+/// The final decision on the best candidate: it passes ([`passes`]) and is
+/// not ambiguous.
+pub fn accepted(best: &Candidate, ambiguous: bool) -> bool {
+    best.evidence > best.vicinity_threshold && best.free_space_ok != 0 && !ambiguous
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params() -> Params {
+        let mut p = Params::defaults(360, 30.0);
+        p.selection = Selection::Vicinity;
+        p.early_accept = 0.9;
+        p.early_min = 0;
+        p
+    }
+
+    /// A candidate with a pose at (x, y, theta), evidence `e` against a
+    /// threshold of 45 (20 beams), `short` of its 20 beams short.
+    fn cand(x: f32, y: f32, theta: f32, e: f32, short: u32) -> Candidate {
+        Candidate {
+            x,
+            y,
+            theta,
+            vicinity: e,
+            evidence: e,
+            vicinity_threshold: 45.0,
+            pairs: 20,
+            short_beams: short,
+            has_pose: 1,
+            free_space_ok: 1,
+            ..Candidate::default()
+        }
+    }
+
+    #[test]
+    fn distinct_means_over_a_metre_or_twenty_degrees() {
+        let a = cand(0.0, 0.0, 0.0, 80.0, 0);
+        assert!(!distinct(&a, &cand(0.9, 0.0, 0.0, 80.0, 0)));
+        assert!(distinct(&a, &cand(0.8, 0.8, 0.0, 80.0, 0)));
+        assert!(!distinct(&a, &cand(0.0, 0.0, 0.34, 80.0, 0)));
+        assert!(distinct(&a, &cand(0.0, 0.0, 0.35, 80.0, 0)));
+        // Headings wrap: 359 degrees is 1 degree away.
+        assert!(!distinct(&a, &cand(0.0, 0.0, 6.27, 80.0, 0)));
+    }
+
+    #[test]
+    fn a_pose_through_walls_loses_to_one_that_is_not() {
+        let good = cand(0.0, 0.0, 0.0, 50.0, 0);
+        let mut through = cand(5.0, 0.0, 0.0, 89.0, 0);
+        through.free_space_ok = 0;
+        assert!(better(&good, &through, Selection::Vicinity));
+        assert!(!better(&through, &good, Selection::Vicinity));
+        // Between two that fail it, the evidence decides.
+        let mut other = cand(1.0, 0.0, 0.0, 88.0, 0);
+        other.free_space_ok = 0;
+        assert!(better(&through, &other, Selection::Vicinity));
+        let mut e = good;
+        e.match_score = 2.0;
+        assert!(better(&e, &good, Selection::MatchScore));
+        assert!(!better(&good, &good, Selection::MatchScore));
+    }
+
+    #[test]
+    fn a_twin_place_within_the_ratio_makes_the_answer_ambiguous() {
+        let best = cand(0.0, 0.0, 0.0, 80.0, 0);
+        let twin = cand(10.0, 0.0, 0.0, 76.0, 0);
+        let near = cand(0.5, 0.0, 0.1, 79.0, 0);
+        assert!(ambiguous(&[best, twin], &best, 0.9));
+        assert!(!ambiguous(&[best, twin], &best, 0.96));
+        assert!(!ambiguous(&[best, twin], &best, 0.0));
+        // The best itself and a pose near it are no alternatives.
+        assert!(!ambiguous(&[best, near], &best, 0.9));
+        // Nor is a twin that sees through walls, or one with no pose.
+        let mut t = twin;
+        t.free_space_ok = 0;
+        assert!(!ambiguous(&[best, t], &best, 0.9));
+        t = twin;
+        t.has_pose = 0;
+        assert!(!ambiguous(&[best, t], &best, 0.9));
+        assert!(accepted(&best, false));
+        assert!(!accepted(&best, true));
+        assert!(!accepted(&cand(0.0, 0.0, 0.0, 45.0, 0), false));
+    }
+
+    #[test]
+    fn a_confident_match_stops_after_confirming_near_rivals() {
+        let p = params();
+        let mut s = Search::new(&p);
+        let mut cands = vec![];
+        // A loose first match: no stop.
+        assert_eq!(s.next(0.9, [0.0, 0.0], &cands), Next::Examine);
+        cands.push(cand(20.0, 0.0, 0.0, 50.0, 0));
+        s.record(&cands, 0.9);
+        assert!(!s.stopping());
+        // A confident one (explained 85.5 / (4.5 x 19) = 1.0, one beam short).
+        assert_eq!(s.next(0.88, [0.0, 0.0], &cands), Next::Examine);
+        cands.push(cand(0.0, 0.0, 0.0, 85.5, 1));
+        s.record(&cands, 0.88);
+        assert!(s.stopping());
+        assert_eq!(s.best(), Some(1));
+        // Within EARLY_CONFIRM_GAMMA: a far site is examined, a near one skipped.
+        assert_eq!(s.next(0.85, [10.0, 0.0], &cands), Next::Examine);
+        assert_eq!(s.next(0.85, [1.0, 1.0], &cands), Next::Skip);
+        // Below the floor: stop.
+        assert_eq!(s.next(0.82, [10.0, 0.0], &cands), Next::Stop);
+    }
+
+    #[test]
+    fn confirmation_examines_at_most_confirm_max_rivals() {
+        let mut s = Search::new(&params());
+        let cands = vec![cand(0.0, 0.0, 0.0, 90.0, 0)];
+        s.record(&cands, 0.9);
+        for _ in 0..CONFIRM_MAX {
+            assert_eq!(s.next(0.9, [30.0, 0.0], &cands), Next::Examine);
+        }
+        assert_eq!(s.next(0.9, [30.0, 0.0], &cands), Next::Stop);
+    }
+
+    #[test]
+    fn many_short_beams_or_no_early_accept_do_not_stop() {
+        let mut s = Search::new(&params());
+        // 5 of 20 beams short: more than a fifth.
+        let c = vec![cand(0.0, 0.0, 0.0, 67.5, 5)];
+        s.record(&c, 0.9);
+        assert!(!s.stopping());
+        let mut p = params();
+        p.early_accept = 0.0;
+        let mut s = Search::new(&p);
+        s.record(&[cand(0.0, 0.0, 0.0, 90.0, 0)], 0.9);
+        assert!(!s.stopping());
+        p.early_accept = 0.9;
+        p.selection = Selection::MatchScore;
+        let mut s = Search::new(&p);
+        s.record(&[cand(0.0, 0.0, 0.0, 90.0, 0)], 0.9);
+        assert!(!s.stopping());
+    }
+
+    #[test]
+    fn early_min_stops_once_enough_candidates_and_a_passing_best() {
+        let mut p = params();
+        p.early_accept = 0.99;
+        p.early_min = 3;
+        let mut s = Search::new(&p);
+        let mut cands = vec![];
+        for k in 0..3 {
+            cands.push(cand(k as f32 * 10.0, 0.0, 0.0, 60.0, 4));
+            s.record(&cands, 0.9);
+            assert_eq!(s.stopping(), k == 2, "after {} candidates", k + 1);
+        }
+    }
+}
