@@ -82,6 +82,21 @@ fn csail_log_against_csail_map() {
             let c = [c.x as f64, c.y as f64, c.theta as f64];
             match localize(&db, &scan, &mut scratch) {
                 Ok(l) => {
+                    // The confidence and the hypotheses are well formed.
+                    assert!((0.0..=1.0).contains(&l.confidence), "{}", l.confidence);
+                    assert_eq!(l.accepted, l.confidence >= db.decision().unwrap().threshold);
+                    let hs = l.hypotheses();
+                    assert!(!hs.is_empty() && hs[0].pose == l.pose);
+                    for (i, a) in hs.iter().enumerate() {
+                        for b in &hs[i + 1..] {
+                            let far = (a.pose.x - b.pose.x).hypot(a.pose.y - b.pose.y) > 1.0
+                                || refloc::wrap_angle(a.pose.theta - b.pose.theta).abs() > 0.349;
+                            assert!(far, "hypotheses not distinct: {a:?} {b:?}");
+                        }
+                    }
+                    if let Some(c) = l.covariance {
+                        assert!(c[0] > 0.0 && c[4] > 0.0 && c[8] > 0.0 && c[1] == c[3]);
+                    }
                     let ok = mapc::eval::within_tolerance(&l.pose, g);
                     let (e, _) = mapc::eval::pose_error(&l.pose, g);
                     let ok_c = mapc::eval::within_tolerance(&l.pose, c);
@@ -119,13 +134,16 @@ fn csail_log_against_csail_map() {
         100.0 * false_c,
         100.0 * truth_off
     );
-    assert!(correct >= 0.90, "accepted and correct {correct}");
+    // Measured with the default decision model (not fitted on CSAIL):
+    // 92.6% / 4.7% against the given poses, 97.3% / 0.0% against the
+    // corrected ones (docs/confidence.md).
+    assert!(correct >= 0.91, "accepted and correct {correct}");
     // The false accepts against the given poses cannot fall below the share
     // of scans whose given pose is off (4.7%); guard just above it.
     assert!(false_acc <= 0.055, "false accepts {false_acc}");
     assert!(median < 0.12, "median error {median}");
     assert!(
-        correct_c >= 0.93,
+        correct_c >= 0.96,
         "accepted and correct (corrected truth) {correct_c}"
     );
     assert!(false_c <= 0.01, "false accepts (corrected truth) {false_c}");

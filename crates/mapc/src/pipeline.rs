@@ -70,6 +70,10 @@ pub struct BuildConfig {
     pub through_run: u32,
     /// Short beams cost nothing when the other beams fit at least this well (0: always).
     pub occlusion_fit: f32,
+    /// Accept a pose when its confidence (the probability that it is right,
+    /// `refloc::confidence`) is at least this (0..=1); stored with the
+    /// default model in the decision section.
+    pub accept_confidence: f32,
     /// The coarse-search index (built for maps with at least
     /// `index.min_sites` sites; its seed is replaced by `seed`).
     pub index: crate::index::IndexOptions,
@@ -102,6 +106,7 @@ impl Default for BuildConfig {
             short_weight: Params::defaults(362, 30.0).short_weight,
             through_run: Params::defaults(362, 30.0).through_run,
             occlusion_fit: Params::defaults(362, 30.0).occlusion_fit,
+            accept_confidence: refloc::Decision::DEFAULT.threshold,
             index: crate::index::IndexOptions::default(),
         }
     }
@@ -355,6 +360,20 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> 
     if let Some(bytes) = index {
         sections.push((SectionKind::Index, bytes));
     }
+    let decision = refloc::Decision {
+        threshold: cfg.accept_confidence,
+        ..refloc::Decision::DEFAULT
+    };
+    if !decision.is_valid() {
+        return Err(format!(
+            "--accept-confidence must be within 0..=1, got {}",
+            cfg.accept_confidence
+        ));
+    }
+    sections.push((
+        SectionKind::Decision,
+        zerocopy::IntoBytes::as_bytes(&refloc::format::DecisionRecord::of(&decision)).to_vec(),
+    ));
     laps.lap("index");
     times.compile = t.elapsed().as_secs_f64();
     let manifest = serde_json::json!({

@@ -179,6 +179,28 @@ typedef struct refloc_db_info {
 } refloc_db_info;
 
 /*
+ One distinct pose hypothesis of a `refloc_result`.
+ */
+typedef struct refloc_hypothesis {
+    /*
+     Robot x in the map frame (m).
+     */
+    float x;
+    /*
+     Robot y in the map frame (m).
+     */
+    float y;
+    /*
+     Robot heading in the map frame (rad).
+     */
+    float theta;
+    /*
+     Probability (0-1) that this pose is right.
+     */
+    float confidence;
+} refloc_hypothesis;
+
+/*
  The answer for one scan, filled by the `refloc_localize_*` functions
  (all zero when they return an error).
  */
@@ -245,14 +267,35 @@ typedef struct refloc_result {
      */
     uint32_t candidates;
     /*
-     1 when the pose is accepted (M > threshold), 0 otherwise: a rejected
-     pose is the best guess, not a fix.
+     1 when the pose is accepted (its confidence is at least the
+     threshold the map stores; in a map built without one, M > threshold
+     and the pose passes the free-space and ambiguity checks), 0
+     otherwise: a rejected pose is the best guess, not a fix.
      */
     uint8_t accepted;
     /*
      Zero.
      */
     uint8_t reserved[3];
+    /*
+     Probability (0-1) that the pose is right.
+     */
+    float confidence;
+    /*
+     Covariance of (x, y, theta), row-major 3x3 (m^2, m rad, rad^2) from
+     the fit of the scan to the map; all zero when it could not be
+     computed (too few points, degenerate geometry).
+     */
+    float covariance[9];
+    /*
+     Entries of `hypotheses` in use (1-5).
+     */
+    uint32_t hypothesis_count;
+    /*
+     The top distinct pose hypotheses (at least 1 m or 20 degrees apart),
+     best first; the first is the pose above.
+     */
+    struct refloc_hypothesis hypotheses[5];
 } refloc_result;
 
 #ifdef __cplusplus

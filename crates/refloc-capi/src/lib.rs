@@ -170,11 +170,38 @@ pub struct refloc_result {
     pub valid_points: u32,
     /// Candidate sites examined.
     pub candidates: u32,
-    /// 1 when the pose is accepted (M > threshold), 0 otherwise: a rejected
-    /// pose is the best guess, not a fix.
+    /// 1 when the pose is accepted (its confidence is at least the
+    /// threshold the map stores; in a map built without one, M > threshold
+    /// and the pose passes the free-space and ambiguity checks), 0
+    /// otherwise: a rejected pose is the best guess, not a fix.
     pub accepted: u8,
     /// Zero.
     pub reserved: [u8; 3],
+    /// Probability (0-1) that the pose is right.
+    pub confidence: f32,
+    /// Covariance of (x, y, theta), row-major 3x3 (m^2, m rad, rad^2) from
+    /// the fit of the scan to the map; all zero when it could not be
+    /// computed (too few points, degenerate geometry).
+    pub covariance: [f32; 9],
+    /// Entries of `hypotheses` in use (1-5).
+    pub hypothesis_count: u32,
+    /// The top distinct pose hypotheses (at least 1 m or 20 degrees apart),
+    /// best first; the first is the pose above.
+    pub hypotheses: [refloc_hypothesis; 5],
+}
+
+/// One distinct pose hypothesis of a `refloc_result`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct refloc_hypothesis {
+    /// Robot x in the map frame (m).
+    pub x: f32,
+    /// Robot y in the map frame (m).
+    pub y: f32,
+    /// Robot heading in the map frame (rad).
+    pub theta: f32,
+    /// Probability (0-1) that this pose is right.
+    pub confidence: f32,
 }
 
 /// What lives inside a `refloc_db`.
@@ -189,7 +216,8 @@ const MAGIC: u64 = 0x5245_464C_4F43_4442; // "REFLOCDB"
 const _: () = assert!(size_of::<Handle>() <= REFLOC_DB_SIZE);
 const _: () = assert!(align_of::<Handle>() <= REFLOC_DB_ALIGN);
 const _: () = assert!(align_of::<refloc_db>() == REFLOC_DB_ALIGN);
-const _: () = assert!(size_of::<refloc_result>() == 64);
+const _: () = assert!(size_of::<refloc_result>() == 188);
+const _: () = assert!(size_of::<refloc_hypothesis>() == 16);
 
 fn db_status(kind: DbErrorKind) -> refloc_status {
     match kind {
@@ -391,6 +419,15 @@ fn fill(out: &mut refloc_result, fix: &Localization<'_>) {
         candidates: fix.candidates.len() as u32,
         accepted: fix.accepted as u8,
         reserved: [0; 3],
+        confidence: fix.confidence,
+        covariance: fix.covariance.unwrap_or([0.0; 9]),
+        hypothesis_count: fix.hypotheses().len() as u32,
+        hypotheses: fix.hypotheses.map(|h| refloc_hypothesis {
+            x: h.pose.x,
+            y: h.pose.y,
+            theta: h.pose.theta,
+            confidence: h.confidence,
+        }),
     };
 }
 

@@ -49,6 +49,7 @@
 #![cfg_attr(feature = "mmap", deny(unsafe_code))]
 
 pub mod coarse;
+pub mod confidence;
 pub mod db;
 pub mod format;
 pub mod frame;
@@ -68,11 +69,12 @@ pub mod verify;
 #[cfg(feature = "mmap")]
 mod mmap;
 
+pub use confidence::Decision;
 pub use db::{DbError, DbErrorKind, RefDb};
 pub use frame::{wrap_angle, MapFrame, Pose2};
 pub use localize::{
-    localize, scratch_size, Candidate, Localization, LocalizeError, Localizer, Prepared, RangeScan,
-    Scan,
+    localize, scratch_size, Candidate, Hypothesis, Localization, LocalizeError, Localizer,
+    Prepared, RangeScan, Scan, MAX_HYPOTHESES,
 };
 #[cfg(feature = "mmap")]
 pub use mmap::{map_file, open_mmap, OpenError};

@@ -11,6 +11,7 @@ use core::fmt;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::coarse::{self, Ranked};
+use crate::confidence::Decision;
 use crate::db::RefDb;
 use crate::params::Params;
 use crate::prep;
@@ -178,6 +179,20 @@ pub struct Candidate {
     pub evidence: f32,
 }
 
+/// Most hypotheses a [`Localization`] reports.
+pub const MAX_HYPOTHESES: usize = 5;
+
+/// One distinct pose hypothesis.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Hypothesis {
+    /// Robot pose in the map frame (m, m, rad).
+    pub pose: Pose2,
+    /// Probability (0..=1) that this pose is right.
+    pub confidence: f32,
+    /// Its index in [`Localization::candidates`].
+    pub candidate: u32,
+}
+
 /// The answer for one scan.
 #[derive(Clone, Copy, Debug)]
 pub struct Localization<'s> {
@@ -201,8 +216,29 @@ pub struct Localization<'s> {
     pub vicinity_threshold: f32,
     /// The evidence for the pose: M less a share of the short beams' weight.
     pub evidence: f32,
-    /// evidence > threshold, few beams through walls, and not ambiguous.
+    /// The pose is accepted: with a database's decision model
+    /// ([`RefDb::decision`]), `confidence >= threshold`; in a database built
+    /// without one, evidence > threshold, few beams through walls, and not
+    /// ambiguous.
     pub accepted: bool,
+    /// Probability (0..=1) that the pose is right ([`crate::confidence`]):
+    /// the database's model, or [`crate::confidence::Decision::DEFAULT`] in
+    /// a database without one.
+    pub confidence: f32,
+    /// Covariance of `pose` (row-major 3x3 over x, y, theta; m^2, m rad,
+    /// rad^2) from the fit of the scan to the map
+    /// ([`crate::refine::covariance`]) plus a floor of one map cell in x
+    /// and y and 0.01 rad in heading: how well the geometry pins the pose
+    /// locally (large along a corridor), as ROS's `/initialpose` carries
+    /// it. `None` when the fit has too few points or is degenerate.
+    pub covariance: Option<[f32; 9]>,
+    /// The top distinct hypotheses (poses at least
+    /// [`crate::select::DISTINCT_DISTANCE`] or
+    /// [`crate::select::DISTINCT_HEADING`] apart), best first, the first
+    /// `hypothesis_count` entries; the first is `pose`.
+    pub hypotheses: [Hypothesis; MAX_HYPOTHESES],
+    /// Entries of `hypotheses` in use (1..=[`MAX_HYPOTHESES`]).
+    pub hypothesis_count: usize,
     /// Another candidate with a clearly different pose scored within
     /// `ambiguity_ratio` of the best (the pose is then not accepted).
     pub ambiguous: bool,
@@ -218,6 +254,13 @@ pub struct Localization<'s> {
     pub free_space_ok: bool,
     /// Every candidate examined, in coarse rank order.
     pub candidates: &'s [Candidate],
+}
+
+impl Localization<'_> {
+    /// The distinct hypotheses, best first.
+    pub fn hypotheses(&self) -> &[Hypothesis] {
+        &self.hypotheses[..self.hypothesis_count.min(MAX_HYPOTHESES)]
+    }
 }
 
 /// Sizes of the working arrays.
@@ -652,10 +695,43 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
             .map(|b| cands[b])
             .ok_or(LocalizeError::NoMatch { candidates: nc })?;
         let pose = Pose2::new(c.x, c.y, c.theta);
-        let ambiguous = select::ambiguous(cands, &c, self.params.ambiguity_ratio);
+        let p = self.params;
+        let ambiguous = select::ambiguous(cands, &c, p.ambiguity_ratio);
+        let model = self.db.decision();
+        let decision = model.unwrap_or(Decision::DEFAULT);
+        let mut hypotheses = [Hypothesis::default(); MAX_HYPOTHESES];
+        let hypothesis_count = select::hypotheses(
+            cands,
+            best.unwrap_or(0),
+            p.selection,
+            &decision,
+            &mut hypotheses,
+        );
+        let confidence = select::capped_confidence(hypotheses[0].confidence, ambiguous);
+        hypotheses[0].confidence = confidence;
+        let accepted = match model {
+            Some(m) => select::accepted_with(&c, confidence, &m),
+            None => select::accepted(&c, ambiguous),
+        };
+        let sensor_pose = pose.compose(&p.sensor.offset);
+        let covariance = refine::covariance(
+            &self.dm,
+            &self.b.in_pts[..self.scan.beams],
+            &sensor_pose,
+            p.refine_max_dist,
+            self.db.frame().resolution * COVARIANCE_FLOOR_CELLS,
+        )
+        .map(|cov| {
+            let mut c = sensor_to_robot_covariance(&cov, &sensor_pose, &pose);
+            let res = self.db.frame().resolution;
+            c[0] += res * res;
+            c[4] += res * res;
+            c[8] += COVARIANCE_HEADING_FLOOR * COVARIANCE_HEADING_FLOOR;
+            c
+        });
         Ok(Localization {
             pose,
-            sensor_pose: pose.compose(&self.params.sensor.offset),
+            sensor_pose,
             site: c.site,
             coarse_rank: c.rank,
             gamma: c.gamma,
@@ -664,7 +740,11 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
             vicinity: c.vicinity,
             vicinity_threshold: c.vicinity_threshold,
             evidence: c.evidence,
-            accepted: select::accepted(&c, ambiguous),
+            accepted,
+            confidence,
+            covariance,
+            hypotheses,
+            hypothesis_count,
             ambiguous,
             valid_points: self.scan.valid as u32,
             short_beams: c.short_beams,
@@ -674,6 +754,41 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
             candidates: cands,
         })
     }
+}
+
+/// Floor of the covariance's noise level: the standard deviation of a
+/// surface's position within its cell, `1 / sqrt(12)` of a cell (uniform).
+const COVARIANCE_FLOOR_CELLS: f32 = 0.288_675_13;
+
+/// Heading standard deviation (rad) added to the covariance, with one map
+/// cell in x and y: the fit's curvature alone treats the beams' errors as
+/// independent, which real ones (a wall a few centimetres off in a map from
+/// another run) are not, so it is a lower bound; the map's own resolution
+/// is the floor of what it can tell.
+const COVARIANCE_HEADING_FLOOR: f32 = 0.01;
+
+/// The covariance of the robot pose `robot = sensor * offset^-1` from the
+/// sensor pose's: `J C J^T`, with `J` the derivative of the composition
+/// with respect to the sensor pose.
+fn sensor_to_robot_covariance(c: &[f32; 9], sensor: &Pose2, robot: &Pose2) -> [f32; 9] {
+    let j = [
+        [1.0, 0.0, -(robot.y - sensor.y)],
+        [0.0, 1.0, robot.x - sensor.x],
+        [0.0, 0.0, 1.0],
+    ];
+    let mut out = [0.0f32; 9];
+    for r in 0..3 {
+        for k in 0..3 {
+            let mut v = 0.0;
+            for a in 0..3 {
+                for b in 0..3 {
+                    v += j[r][a] * c[a * 3 + b] * j[k][b];
+                }
+            }
+            out[r * 3 + k] = v;
+        }
+    }
+    out
 }
 
 /// A candidate record before (or without) the fine stage.

@@ -131,6 +131,63 @@ fn cost(dm: &DistMap<'_>, pts: &[[f32; 2]], pose: &Pose2, max_dist: f32) -> (f32
     (total, n)
 }
 
+/// The robust (Cauchy-weighted) Gauss-Newton normal equations of the
+/// points' distances to the map's surfaces at `pose`.
+struct NormalEquations {
+    /// `J^T W J`.
+    h: [[f32; 3]; 3],
+    /// `J^T W d`.
+    g: [f32; 3],
+    /// Sum of the weights.
+    wsum: f32,
+    /// Weighted sum of the squared distances (m^2).
+    wd2: f32,
+    /// Points that carried weight (within `max_dist` of a surface).
+    n: u32,
+}
+
+fn normal_equations(
+    dm: &DistMap<'_>,
+    pts: &[[f32; 2]],
+    pose: &Pose2,
+    max_dist: f32,
+) -> NormalEquations {
+    let (s, c) = (libm::sinf(pose.theta), libm::cosf(pose.theta));
+    let c2 = ROBUST_SCALE * ROBUST_SCALE;
+    let mut ne = NormalEquations {
+        h: [[0.0; 3]; 3],
+        g: [0.0; 3],
+        wsum: 0.0,
+        wd2: 0.0,
+        n: 0,
+    };
+    for p in pts {
+        if !p[0].is_finite() {
+            continue;
+        }
+        let m = [pose.x + c * p[0] - s * p[1], pose.y + s * p[0] + c * p[1]];
+        let Some((d, grad)) = dm.sample(m) else {
+            continue;
+        };
+        if !(d < max_dist) {
+            continue;
+        }
+        let wgt = 1.0 / (1.0 + d * d / c2);
+        let dth = grad[0] * (-s * p[0] - c * p[1]) + grad[1] * (c * p[0] - s * p[1]);
+        let j = [grad[0], grad[1], dth];
+        for a in 0..3 {
+            ne.g[a] += wgt * j[a] * d;
+            for b in 0..3 {
+                ne.h[a][b] += wgt * j[a] * j[b];
+            }
+        }
+        ne.wsum += wgt;
+        ne.wd2 += wgt * d * d;
+        ne.n += 1;
+    }
+    ne
+}
+
 /// Refines the sensor pose `pose` (map frame) so the sensor-frame points
 /// `pts` (non-finite entries skipped) fall on the map's surfaces: iteratively
 /// reweighted Gauss-Newton with Cauchy weights, a step accepted only when it
@@ -146,35 +203,11 @@ pub fn refine(
 ) -> (Pose2, u32) {
     let mut pose = pose;
     let mut used = 0;
-    let c2 = ROBUST_SCALE * ROBUST_SCALE;
     let mut current = cost(dm, pts, &pose, max_dist).0;
     for _ in 0..iters {
-        let (s, c) = (libm::sinf(pose.theta), libm::cosf(pose.theta));
-        let mut h = [[0.0f32; 3]; 3];
-        let mut g = [0.0f32; 3];
-        used = 0;
-        for p in pts {
-            if !p[0].is_finite() {
-                continue;
-            }
-            let m = [pose.x + c * p[0] - s * p[1], pose.y + s * p[0] + c * p[1]];
-            let Some((d, grad)) = dm.sample(m) else {
-                continue;
-            };
-            if !(d < max_dist) {
-                continue;
-            }
-            let wgt = 1.0 / (1.0 + d * d / c2);
-            let dth = grad[0] * (-s * p[0] - c * p[1]) + grad[1] * (c * p[0] - s * p[1]);
-            let j = [grad[0], grad[1], dth];
-            for a in 0..3 {
-                g[a] += wgt * j[a] * d;
-                for b in 0..3 {
-                    h[a][b] += wgt * j[a] * j[b];
-                }
-            }
-            used += 1;
-        }
+        let ne = normal_equations(dm, pts, &pose, max_dist);
+        let (mut h, g) = (ne.h, ne.g);
+        used = ne.n;
         if used < 3 {
             break;
         }
@@ -211,6 +244,51 @@ pub fn refine(
         }
     }
     (pose, used)
+}
+
+/// Covariance (row-major 3x3, x and y in m, theta in rad) of a sensor pose
+/// fitted to the points `pts` by [`refine`]: `s^2 (J^T W J)^-1` at `pose`,
+/// with the Cauchy weights `W` of the fit, and `s^2` the weighted mean
+/// squared distance of the points to the map's surfaces, floored at the
+/// distance map's quantization (`floor_m`, m, as a standard deviation).
+/// This is the local curvature of the fit (how well the geometry pins the
+/// pose: large along a featureless corridor), not the chance of a wrong
+/// place, which [`crate::confidence`] gives. `None` with fewer than 4
+/// points carrying weight or degenerate geometry.
+pub fn covariance(
+    dm: &DistMap<'_>,
+    pts: &[[f32; 2]],
+    pose: &Pose2,
+    max_dist: f32,
+    floor_m: f32,
+) -> Option<[f32; 9]> {
+    let NormalEquations {
+        h, wsum, wd2, n, ..
+    } = normal_equations(dm, pts, pose, max_dist);
+    if n < 4 || !(wsum > 0.0) {
+        return None;
+    }
+    let var = (wd2 / wsum).max(floor_m * floor_m) * n as f32 / (n - 3) as f32;
+    let mut out = [0.0f32; 9];
+    for k in 0..3 {
+        let mut e = [0.0f32; 3];
+        e[k] = 1.0;
+        let col = solve3(&h, &e)?;
+        for r in 0..3 {
+            out[r * 3 + k] = var * col[r];
+        }
+    }
+    // Symmetric by construction up to rounding; make it exactly so.
+    for (a, b) in [(1, 3), (2, 6), (5, 7)] {
+        let m = 0.5 * (out[a] + out[b]);
+        out[a] = m;
+        out[b] = m;
+    }
+    if out.iter().all(|v| v.is_finite()) && out[0] > 0.0 && out[4] > 0.0 && out[8] > 0.0 {
+        Some(out)
+    } else {
+        None
+    }
 }
 
 /// Solves the 3x3 system `h x = g` (Cramer's rule); `None` when singular.

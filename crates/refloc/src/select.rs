@@ -6,9 +6,11 @@
 //! Everything here works on [`Candidate`] records alone (no database, no
 //! scan), so each rule can be tested on constructed cases.
 
-use crate::localize::Candidate;
+use crate::confidence::{self, Decision};
+use crate::localize::{Candidate, Hypothesis};
 use crate::params::{Params, Selection};
 use crate::verify;
+use crate::Pose2;
 
 /// After the early stop's condition holds at a candidate of coarse score
 /// gamma, the candidates still to come with a score of at least
@@ -73,6 +75,45 @@ pub fn explained_ratio(c: &Candidate) -> f32 {
 /// True when `c` passes the acceptance threshold and the free-space check.
 pub fn passes(c: &Candidate) -> bool {
     c.has_pose != 0 && c.free_space_ok != 0 && c.evidence > c.vicinity_threshold
+}
+
+/// Fills `out` with the distinct hypotheses among `cands`, best first:
+/// candidate `best` (the answer), then repeatedly the best candidate with a
+/// pose (by [`better`]) that is distinct from every one chosen, each with
+/// its probability under `decision`. Returns how many (0 when `best` has no
+/// pose). The probabilities are each a hypothesis's own; they need not sum
+/// to 1 (several may all be unlikely).
+pub fn hypotheses(
+    cands: &[Candidate],
+    best: usize,
+    selection: Selection,
+    decision: &Decision,
+    out: &mut [Hypothesis],
+) -> usize {
+    let mut n = 0;
+    let mut next = cands.get(best).filter(|c| c.has_pose != 0).map(|_| best);
+    while let (Some(i), true) = (next, n < out.len()) {
+        let c = &cands[i];
+        out[n] = Hypothesis {
+            pose: Pose2::new(c.x, c.y, c.theta),
+            confidence: decision.probability(&confidence::features(cands, c)),
+            candidate: i as u32,
+        };
+        n += 1;
+        next = None;
+        for (k, o) in cands.iter().enumerate() {
+            let new = o.has_pose != 0
+                && out[..n].iter().all(|h| {
+                    cands
+                        .get(h.candidate as usize)
+                        .is_some_and(|t| distinct(o, t))
+                });
+            if new && next.is_none_or(|p| better(o, &cands[p], selection)) {
+                next = Some(k);
+            }
+        }
+    }
+    n
 }
 
 /// What to do with the next coarse candidate.
@@ -193,8 +234,29 @@ pub fn ambiguous(cands: &[Candidate], best: &Candidate, ratio: f32) -> bool {
         })
 }
 
-/// The final decision on the best candidate: it passes ([`passes`]) and is
-/// not ambiguous.
+/// Highest confidence an ambiguous answer is given: another distinct pose
+/// explains the scan nearly as well (within `ambiguity_ratio` of its
+/// evidence), so the answer is at best a toss between the two.
+pub const AMBIGUOUS_CONFIDENCE: f32 = 0.5;
+
+/// The answer's confidence from the model's probability `p`: capped at
+/// [`AMBIGUOUS_CONFIDENCE`] when the answer is ambiguous.
+pub fn capped_confidence(p: f32, ambiguous: bool) -> f32 {
+    if ambiguous {
+        p.min(AMBIGUOUS_CONFIDENCE)
+    } else {
+        p
+    }
+}
+
+/// The decision with a database's model: the best candidate has a pose and
+/// its confidence (from [`capped_confidence`]) is at least the threshold.
+pub fn accepted_with(best: &Candidate, confidence: f32, decision: &Decision) -> bool {
+    best.has_pose != 0 && confidence >= decision.threshold
+}
+
+/// The decision in a database without a model: it passes ([`passes`]) and
+/// is not ambiguous.
 pub fn accepted(best: &Candidate, ambiguous: bool) -> bool {
     best.evidence > best.vicinity_threshold && best.free_space_ok != 0 && !ambiguous
 }
@@ -202,6 +264,57 @@ pub fn accepted(best: &Candidate, ambiguous: bool) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_twin_place_as_good_caps_the_confidence_and_is_rejected() {
+        let best = cand(0.0, 0.0, 0.0, 80.0, 0);
+        let twin = cand(10.0, 0.0, 0.0, 79.0, 0);
+        let cands = [best, twin];
+        let amb = ambiguous(&cands, &best, params().ambiguity_ratio);
+        assert!(amb);
+        let mut h = [Hypothesis::default(); 5];
+        let n = hypotheses(&cands, 0, Selection::Vicinity, &Decision::DEFAULT, &mut h);
+        assert_eq!(n, 2);
+        assert_eq!((h[0].candidate, h[1].candidate), (0, 1));
+        let c = capped_confidence(h[0].confidence, amb);
+        assert!(c <= AMBIGUOUS_CONFIDENCE);
+        assert!(!accepted_with(&best, c, &Decision::DEFAULT));
+        // Without the twin the same pose is accepted.
+        let alone = [best];
+        let mut h1 = [Hypothesis::default(); 5];
+        hypotheses(&alone, 0, Selection::Vicinity, &Decision::DEFAULT, &mut h1);
+        let c1 = capped_confidence(h1[0].confidence, ambiguous(&alone, &best, 0.97));
+        assert!(accepted_with(&best, c1, &Decision::DEFAULT), "{c1}");
+    }
+
+    #[test]
+    fn hypotheses_are_distinct_and_best_first() {
+        // Three candidates on one pose, two on another, one on a third.
+        let cands = [
+            cand(0.0, 0.0, 0.0, 80.0, 0),
+            cand(0.1, 0.0, 0.0, 82.0, 0),
+            cand(5.0, 0.0, 0.0, 60.0, 0),
+            cand(5.2, 0.1, 0.0, 61.0, 0),
+            cand(0.0, 0.0, 3.0, 70.0, 0),
+        ];
+        let mut h = [Hypothesis::default(); 5];
+        let n = hypotheses(&cands, 1, Selection::Vicinity, &Decision::DEFAULT, &mut h);
+        assert_eq!(n, 3);
+        let order: Vec<u32> = h[..n].iter().map(|x| x.candidate).collect();
+        assert_eq!(order, [1, 4, 3]);
+        assert!(h[0].confidence > h[1].confidence && h[1].confidence >= h[2].confidence);
+        // A short output keeps the best ones; no pose, no hypotheses.
+        let mut two = [Hypothesis::default(); 2];
+        assert_eq!(
+            hypotheses(&cands, 1, Selection::Vicinity, &Decision::DEFAULT, &mut two),
+            2
+        );
+        let none = [Candidate::default()];
+        assert_eq!(
+            hypotheses(&none, 0, Selection::Vicinity, &Decision::DEFAULT, &mut h),
+            0
+        );
+    }
 
     fn params() -> Params {
         let mut p = Params::defaults(360, 30.0);

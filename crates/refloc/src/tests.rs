@@ -284,6 +284,9 @@ pub(crate) mod fixture {
                     SectionKind::Manifest => br#"{"generator":"refloc unit tests"}"#.to_vec(),
                     SectionKind::Windows => windows.as_bytes().to_vec(),
                     SectionKind::Index => tiny_index(&p, &hists, &windows, sites.len()),
+                    SectionKind::Decision => format::DecisionRecord::of(&crate::Decision::DEFAULT)
+                        .as_bytes()
+                        .to_vec(),
                 };
                 (k, bytes)
             })

@@ -171,6 +171,17 @@ static void check_pose(const refloc_result *r, const double truth[3], const char
              what, r->x, r->y, r->theta, truth[0], truth[1], truth[2], dp, dt * 180.0 / 3.14159265358979,
              r->site, r->vicinity, r->vicinity_threshold, r->accepted ? "accepted" : "rejected");
     check(r->accepted == 1 && dp < MAX_POS_ERR && dt < MAX_THETA_ERR, line);
+    snprintf(line, sizeof line, "%s: confidence %.4f, %u hypotheses, first at (%.3f, %.3f)", what,
+             r->confidence, r->hypothesis_count, r->hypotheses[0].x, r->hypotheses[0].y);
+    check(r->confidence > 0.5f && r->confidence <= 1.0f && r->hypothesis_count >= 1 &&
+              r->hypothesis_count <= 5 && r->hypotheses[0].x == r->x && r->hypotheses[0].y == r->y &&
+              r->hypotheses[0].confidence == r->confidence,
+          line);
+    snprintf(line, sizeof line, "%s: covariance diagonal %.3g m^2 %.3g m^2 %.3g rad^2", what,
+             r->covariance[0], r->covariance[4], r->covariance[8]);
+    check(r->covariance[0] > 0.0f && r->covariance[4] > 0.0f && r->covariance[8] > 0.0f &&
+              r->covariance[1] == r->covariance[3] && r->covariance[0] < 1.0f && r->covariance[4] < 1.0f,
+          line);
 }
 
 int main(int argc, char **argv) {

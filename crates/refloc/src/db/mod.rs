@@ -10,9 +10,11 @@ use core::ops::Range;
 
 use zerocopy::FromBytes;
 
+use crate::confidence::Decision;
 use crate::format::{
-    self, crc, Header, MetaRecord, ParamsRecord, SectionEntry, SectionKind, SiteRecord,
-    ENDIAN_CHECK, ENTRY_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, MAX_SECTIONS, SECTION_ALIGN,
+    self, crc, DecisionRecord, Header, MetaRecord, ParamsRecord, SectionEntry, SectionKind,
+    SiteRecord, ENDIAN_CHECK, ENTRY_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, MAX_SECTIONS,
+    SECTION_ALIGN,
 };
 use crate::params::Params;
 use crate::raycast::BitGrid;
@@ -166,6 +168,7 @@ pub struct RefDb<D: AsRef<[u8]>> {
     params: Params,
     frame: MapFrame,
     site_count: usize,
+    decision: Option<Decision>,
 }
 
 fn kind_index(k: SectionKind) -> usize {
@@ -176,7 +179,7 @@ impl<D: AsRef<[u8]>> RefDb<D> {
     /// Checks structure, bounds, alignment and counts; no checksums (see
     /// [`RefDb::verify`]). Never panics, never allocates.
     pub fn new(data: D) -> Result<Self, DbError> {
-        let (sections, crcs, meta, params) = parse(data.as_ref())?;
+        let (sections, crcs, meta, params, decision) = parse(data.as_ref())?;
         let frame = MapFrame {
             resolution: meta.resolution.get(),
             origin: Pose2 {
@@ -194,6 +197,7 @@ impl<D: AsRef<[u8]>> RefDb<D> {
             params,
             frame,
             site_count,
+            decision,
         })
     }
 
@@ -341,13 +345,26 @@ impl<D: AsRef<[u8]>> RefDb<D> {
         )
     }
 
+    /// The decision model and acceptance threshold the database stores
+    /// ([`crate::confidence`]); `None` in a file built before it, which
+    /// keeps its evidence-threshold acceptance.
+    pub fn decision(&self) -> Option<Decision> {
+        self.decision
+    }
+
     /// The build manifest (UTF-8 JSON written by mapc; may be empty).
     pub fn manifest(&self) -> &str {
         core::str::from_utf8(self.section(SectionKind::Manifest)).unwrap_or("")
     }
 }
 
-type Parsed = ([Range<usize>; N_KINDS], [u32; N_KINDS], MetaRecord, Params);
+type Parsed = (
+    [Range<usize>; N_KINDS],
+    [u32; N_KINDS],
+    MetaRecord,
+    Params,
+    Option<Decision>,
+);
 
 fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
     use DbErrorKind::*;
@@ -599,7 +616,26 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
     }
     crate::index::validate(sec(SectionKind::Index), &params, n_sites as usize)
         .map_err(DbError::invalid)?;
-    Ok((sections, crcs, meta, params))
+    let decision = match sec(SectionKind::Decision) {
+        [] => None,
+        d => {
+            exact(
+                SectionKind::Decision,
+                core::mem::size_of::<DecisionRecord>(),
+            )?;
+            let r = DecisionRecord::read_from_bytes(d)
+                .map_err(|_| DbError::new(Size, "decision", 0, 0))?;
+            let m = r.decision();
+            if !(0.0..=1.0).contains(&m.threshold) {
+                return Err(DbError::value("decision threshold", m.threshold as f64));
+            }
+            if !m.is_valid() {
+                return Err(DbError::invalid("decision model (a non-finite weight)"));
+            }
+            Some(m)
+        }
+    };
+    Ok((sections, crcs, meta, params, decision))
 }
 
 #[cfg(test)]

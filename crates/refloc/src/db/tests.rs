@@ -386,6 +386,7 @@ fn every_flipped_section_byte_is_caught() {
                                     | SectionKind::Sites
                                     | SectionKind::Neighbors
                                     | SectionKind::Index
+                                    | SectionKind::Decision
                             ),
                             "{} content is not checked by new(): {e:?}",
                             kind.name()

@@ -125,11 +125,17 @@ pub enum SectionKind {
     /// Absent (or empty) in small databases: the coarse stage then scores
     /// every site. Added within version 1: files without it read as before.
     Index = 11,
+    /// Optional decision model: one [`DecisionRecord`] (the confidence
+    /// model and the acceptance threshold, see [`crate::confidence`]).
+    /// Added within version 1: a file without it keeps the acceptance rule
+    /// it was built with (evidence over the threshold, free-space check,
+    /// not ambiguous).
+    Decision = 12,
 }
 
 impl SectionKind {
     /// All kinds, in file order.
-    pub const ALL: [SectionKind; 11] = [
+    pub const ALL: [SectionKind; 12] = [
         SectionKind::Meta,
         SectionKind::Params,
         SectionKind::Grid,
@@ -141,6 +147,7 @@ impl SectionKind {
         SectionKind::Manifest,
         SectionKind::Windows,
         SectionKind::Index,
+        SectionKind::Decision,
     ];
 
     /// From the raw value, if known.
@@ -162,12 +169,50 @@ impl SectionKind {
             SectionKind::Manifest => "manifest",
             SectionKind::Windows => "windows",
             SectionKind::Index => "index",
+            SectionKind::Decision => "decision",
         }
     }
 
     /// True for a section a file may leave out (it then reads as empty).
     pub fn optional(self) -> bool {
-        matches!(self, SectionKind::Index)
+        matches!(self, SectionKind::Index | SectionKind::Decision)
+    }
+}
+
+/// The decision section (32 bytes): a logistic confidence model over
+/// [`crate::confidence::FEATURES`] features and the acceptance threshold.
+#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[repr(C)]
+pub struct DecisionRecord {
+    /// Intercept.
+    pub bias: F32,
+    /// Weights of the evidence ratio, the margin, ln support and the
+    /// through share.
+    pub weights: [F32; 4],
+    /// Accept when the confidence is at least this (0..=1).
+    pub threshold: F32,
+    /// Zero.
+    pub reserved: [U32; 2],
+}
+
+impl DecisionRecord {
+    /// The record of a model.
+    pub fn of(d: &crate::confidence::Decision) -> DecisionRecord {
+        DecisionRecord {
+            bias: F32::new(d.bias),
+            weights: d.weights.map(F32::new),
+            threshold: F32::new(d.threshold),
+            reserved: [U32::new(0); 2],
+        }
+    }
+
+    /// The model of a record (unchecked: see [`crate::confidence::Decision::is_valid`]).
+    pub fn decision(&self) -> crate::confidence::Decision {
+        crate::confidence::Decision {
+            bias: self.bias.get(),
+            weights: self.weights.map(|w| w.get()),
+            threshold: self.threshold.get(),
+        }
     }
 }
 
@@ -481,3 +526,4 @@ const _: () = assert!(core::mem::size_of::<SiteRecord>() == 24);
 const _: () = assert!(core::mem::size_of::<IndexHeader>() == 16);
 const _: () = assert!(core::mem::size_of::<IndexView>() == 16);
 const _: () = assert!(core::mem::size_of::<IndexNode>() == 16);
+const _: () = assert!(core::mem::size_of::<DecisionRecord>() == 32);

@@ -107,6 +107,9 @@ pub struct BuildOpts {
     /// Short beams cost nothing when the other beams fit the map at least this well (explained share; 0: they always cost --short-weight).
     #[arg(long, value_name = "SHARE")]
     pub occlusion_fit: Option<f32>,
+    /// Accept a pose when its confidence (probability that it is right, 0-1) is at least this; stored in the .refdb.
+    #[arg(long, value_name = "P", default_value_t = refloc::Decision::DEFAULT.threshold)]
+    pub accept_confidence: f32,
     /// Build the coarse-search index (sublinear ranking of the sites) for maps with at least this many sites; smaller maps are ranked exhaustively.
     #[arg(long, value_name = "SITES", default_value_t = mapc::index::IndexOptions::default().min_sites)]
     pub index_min_sites: usize,
@@ -151,6 +154,7 @@ impl BuildOpts {
             short_weight: self.short_weight.unwrap_or(d.short_weight),
             through_run: self.through_run.unwrap_or(d.through_run),
             occlusion_fit: self.occlusion_fit.unwrap_or(d.occlusion_fit),
+            accept_confidence: self.accept_confidence,
             index: mapc::index::IndexOptions {
                 min_sites: self.index_min_sites,
                 beam: self.index_beam,

@@ -66,6 +66,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         short_weight: None,
         through_run: None,
         occlusion_fit: None,
+        accept_confidence: refloc::Decision::DEFAULT.threshold,
         index_min_sites: mapc::index::IndexOptions::default().min_sites,
         index_beam: mapc::index::IndexOptions::default().beam,
         index_leaves: mapc::index::IndexOptions::default().leaves,

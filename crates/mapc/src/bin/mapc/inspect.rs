@@ -70,6 +70,14 @@ pub fn params_json(p: &refloc::Params) -> Value {
     v
 }
 
+/// The decision model a database stores, or null without one.
+pub fn decision_json(d: Option<refloc::Decision>) -> Value {
+    match d {
+        Some(d) => json!({"bias": d.bias, "weights": d.weights, "accept_confidence": d.threshold}),
+        None => Value::Null,
+    }
+}
+
 /// The coarse-search index's shape, or null without one.
 fn index_json<D: AsRef<[u8]>>(db: &RefDb<D>) -> Value {
     let Some(ix) = db.index() else {
@@ -105,6 +113,7 @@ fn info_json<D: AsRef<[u8]>>(db: &RefDb<D>) -> Value {
         "sections": sections,
         "index": index_json(db),
         "params": params_json(db.params()),
+        "decision": decision_json(db.decision()),
         "manifest": manifest,
     })
 }
