@@ -400,3 +400,40 @@ fn a_coarse_index_is_built_on_request_verified_and_as_good_as_exhaustive_ranking
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(text(&o).contains("index beam"), "{}", text(&o));
 }
+
+#[test]
+fn eval_runs_the_disturbance_suite() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = built(dir.path(), &[]);
+    let out = dir.path().join("eval");
+    let o = mapc(
+        &[
+            "eval",
+            db.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--poses",
+            "30",
+            "--experiments",
+            "disturbances",
+            "--no-figures",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    for class in mapc::disturb::Class::ALL {
+        let s = &report["summaries"][class.name()];
+        let (n, correct) = (s["n"].as_u64().unwrap(), s["correct"].as_u64().unwrap());
+        assert_eq!(n, 30, "{}", class.name());
+        // The synthetic office is easy: most disturbed poses are found.
+        assert!(correct * 10 >= n * 8, "{}: {correct} of {n}", class.name());
+    }
+    let o = mapc(
+        &["eval", db.to_str().unwrap(), "--experiments", "doors"],
+        dir.path(),
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("people"), "{}", text(&o));
+}

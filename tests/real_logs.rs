@@ -217,6 +217,7 @@ fn symmetric_map_is_not_accepted_at_the_twin_place() {
         noise: 0.0,
         short_outliers: 0,
         swap_outliers: 0,
+        disturbance: None,
     };
     let trials = mapc::eval::run_e4(&db, &poses, &spec, 1, None, &|| {});
     let s = mapc::eval::summarize(&trials);

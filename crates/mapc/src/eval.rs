@@ -60,6 +60,9 @@ pub struct ScanSpec {
     pub short_outliers: usize,
     /// x-y swap outliers per scan (sent as points).
     pub swap_outliers: usize,
+    /// A disturbance of the world or the scan ([`crate::disturb`]) applied
+    /// before the noise and outliers above.
+    pub disturbance: Option<crate::disturb::Class>,
 }
 
 impl ScanSpec {
@@ -398,7 +401,10 @@ pub fn simulate(
     rng: &mut Rng,
 ) -> SimScan {
     let lidar = spec.lidar();
-    let mut ranges = sim::virtual_scan(grid, frame, sensor, &lidar);
+    let mut ranges = match spec.disturbance {
+        Some(class) => crate::disturb::scan(class, grid, frame, sensor, &lidar, rng),
+        None => sim::virtual_scan(grid, frame, sensor, &lidar),
+    };
     sim::add_noise(
         &mut ranges,
         &lidar,

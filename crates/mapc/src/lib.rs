@@ -6,6 +6,7 @@
 #![deny(missing_docs)]
 
 pub mod compile;
+pub mod disturb;
 pub mod edt;
 pub mod eval;
 pub mod figures;

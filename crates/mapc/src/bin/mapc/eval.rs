@@ -42,7 +42,7 @@ pub struct Args {
     /// Outliers per scan in the dynamic runs (random short returns; and x-y swaps in dynamic-swap).
     #[arg(long, default_value_t = 60)]
     pub outliers: usize,
-    /// Experiments to run, comma separated: static, dynamic, dynamic-swap, e1, e2, wrong-map.
+    /// Experiments to run, comma separated: static, dynamic, dynamic-swap, e1, e2, wrong-map, and the disturbance suite: people, furniture-added, furniture-removed, shifted, missing-returns, range-noise, angular-jitter, motion (or `disturbances` for all of them; docs/results.md).
     #[arg(
         long,
         default_value = "static,dynamic,dynamic-swap,e1",
@@ -175,10 +175,28 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
             "--fov must be in (0, 360] degrees and --beams at least 3"
         )));
     }
-    let want = |e: &str| a.experiments.iter().any(|x| x == e);
+    let all_disturbances = a.experiments.iter().any(|x| x == "disturbances");
+    let want = |e: &str| {
+        a.experiments.iter().any(|x| x == e)
+            || (all_disturbances && mapc::disturb::Class::parse(e).is_some())
+    };
     for e in &a.experiments {
-        if !["static", "dynamic", "dynamic-swap", "e1", "e2", "wrong-map"].contains(&e.as_str()) {
-            return Err(input_err(anyhow::anyhow!("unknown experiment '{e}'")));
+        if ![
+            "static",
+            "dynamic",
+            "dynamic-swap",
+            "e1",
+            "e2",
+            "wrong-map",
+            "disturbances",
+        ]
+        .contains(&e.as_str())
+            && mapc::disturb::Class::parse(e).is_none()
+        {
+            return Err(input_err(anyhow::anyhow!(
+                "unknown experiment '{e}' (known: static, dynamic, dynamic-swap, e1, e2, wrong-map, disturbances, {})",
+                mapc::disturb::Class::ALL.map(|c| c.name()).join(", ")
+            )));
         }
     }
     let spec = |noise: f32, short: usize, swap: usize| ScanSpec {
@@ -188,6 +206,7 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
         noise,
         short_outliers: short,
         swap_outliers: swap,
+        disturbance: None,
     };
     let poses = eval::sample_poses(&db, a.poses, a.clearance, a.seed);
     if poses.is_empty() {
@@ -209,6 +228,15 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
         ("dynamic-swap", spec(a.noise, 0, a.outliers)),
     ]
     .into_iter()
+    .chain(mapc::disturb::Class::ALL.map(|c| {
+        (
+            c.name(),
+            ScanSpec {
+                disturbance: Some(c),
+                ..spec(0.0, 0, 0)
+            },
+        )
+    }))
     .filter(|(n, _)| want(n))
     .collect();
     let mut static_trials: Option<Vec<Trial>> = None;

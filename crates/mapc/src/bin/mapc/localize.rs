@@ -314,7 +314,8 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                             .iter()
                             .map(|c| json!({"site": c.site, "rank": c.rank, "gamma": c.gamma, "match_score": c.match_score,
                                 "has_pose": c.has_pose != 0, "x": c.x, "y": c.y, "theta": c.theta, "vicinity": c.vicinity,
-                                "evidence": c.evidence, "free_space_ok": c.free_space_ok != 0, "short_beams": c.short_beams, "pairs": c.pairs}))
+                                "evidence": c.evidence, "free_space_ok": c.free_space_ok != 0, "short_beams": c.short_beams, "pairs": c.pairs,
+                                "through_beams": c.through_beams, "long_beams": c.long_beams}))
                             .collect();
                     }
                     if let Some((e, et)) = err {
