@@ -1,0 +1,384 @@
+//! Python bindings of refloc (`import refloc`): open a compiled map, localize
+//! scans given as numpy arrays, compile a map. A thin layer: every number
+//! comes from the `refloc` runtime or the `mapc` compiler unchanged. Units
+//! are metres and radians, poses in the map frame (REP-103).
+
+use std::path::PathBuf;
+
+use numpy::{AllowTypeChange, PyArray1, PyArray2, PyArrayLike1, PyArrayMethods};
+use pyo3::create_exception;
+use pyo3::exceptions::{PyException, PyOSError, PyValueError};
+use pyo3::prelude::*;
+
+create_exception!(
+    refloc,
+    RefDbError,
+    PyException,
+    "A .refdb file that is not a valid database (the message says what and where)."
+);
+create_exception!(
+    refloc,
+    LocalizeError,
+    PyException,
+    "A scan that cannot be localized (bad geometry, too few points, no match)."
+);
+create_exception!(
+    refloc,
+    BuildError,
+    PyException,
+    "A map that cannot be compiled."
+);
+
+/// A compiled map (`.refdb`), memory-mapped and checked (structure and
+/// checksums) when opened.
+#[pyclass(frozen, module = "refloc")]
+struct RefDb {
+    db: refloc::RefDb<memmap2::Mmap>,
+    path: PathBuf,
+}
+
+#[pymethods]
+impl RefDb {
+    /// Opens and checks the database at `path`.
+    #[new]
+    fn new(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        py.detach(|| {
+            let map = refloc::map_file(&path)
+                .map_err(|e| PyOSError::new_err(format!("{}: {e}", path.display())))?;
+            let db = refloc::RefDb::new(map)
+                .map_err(|e| RefDbError::new_err(format!("{}: {e}", path.display())))?;
+            db.verify()
+                .map_err(|e| RefDbError::new_err(format!("{}: {e}", path.display())))?;
+            Ok(RefDb { db, path })
+        })
+    }
+
+    /// Number of reference sites.
+    #[getter]
+    fn site_count(&self) -> usize {
+        self.db.site_count()
+    }
+
+    /// Map-frame position (x, y in m) of reference site `i` (a free place
+    /// on the map's Voronoi diagram).
+    fn site_position(&self, i: usize) -> PyResult<(f32, f32)> {
+        if i >= self.db.site_count() {
+            return Err(pyo3::exceptions::PyIndexError::new_err(format!(
+                "site {i} of {}",
+                self.db.site_count()
+            )));
+        }
+        let p = self.db.site_xy(i);
+        Ok((p[0], p[1]))
+    }
+
+    /// Bytes of scratch memory a scan of `beams` beams needs.
+    fn scratch_size(&self, beams: usize) -> usize {
+        refloc::scratch_size(self.db.params(), beams)
+    }
+
+    /// The acceptance threshold of the confidence stored in the database
+    /// (None for a database built without a decision model).
+    #[getter]
+    fn accept_confidence(&self) -> Option<f32> {
+        self.db.decision().map(|d| d.threshold)
+    }
+
+    /// Localizes one scan with no initial pose (see `Localizer.localize`);
+    /// allocates the scratch memory for this call.
+    #[pyo3(signature = (ranges, angle_min, angle_increment, range_min=0.0, range_max=30.0))]
+    fn localize(
+        slf: Bound<'_, Self>,
+        ranges: PyArrayLike1<'_, f32, AllowTypeChange>,
+        angle_min: f32,
+        angle_increment: f32,
+        range_min: f32,
+        range_max: f32,
+    ) -> PyResult<Localization> {
+        let beams = ranges.len()?;
+        let mut loc = Localizer::new(slf, beams)?;
+        loc.localize(ranges, angle_min, angle_increment, range_min, range_max)
+    }
+
+    /// A virtual scan of the map (ranges in m, inf = no return) of a sensor
+    /// at map-frame pose (x, y, theta) with `beams` beams evenly over
+    /// `fov` rad centred ahead, as `mapc eval` simulates them: for trying
+    /// the package without a robot. Returns (ranges, angle_min,
+    /// angle_increment).
+    #[pyo3(signature = (x, y, theta, beams=360, fov=std::f32::consts::TAU, range_max=30.0))]
+    #[allow(clippy::too_many_arguments)] // Python keyword arguments
+    fn simulate_scan<'py>(
+        &self,
+        py: Python<'py>,
+        x: f32,
+        y: f32,
+        theta: f32,
+        beams: usize,
+        fov: f32,
+        range_max: f32,
+    ) -> PyResult<(Bound<'py, PyArray1<f32>>, f32, f32)> {
+        let ok = (3..=1 << 16).contains(&beams)
+            && fov > 0.0
+            && fov <= std::f32::consts::TAU
+            && range_max > 0.0
+            && range_max.is_finite();
+        if !ok {
+            return Err(PyValueError::new_err(
+                "beams must be 3..=65536, fov in (0, 2 pi] rad, range_max > 0 m",
+            ));
+        }
+        let lidar = mapc::sim::Lidar::new(beams, fov, range_max);
+        let ranges = mapc::sim::virtual_scan(
+            &self.db.grid(),
+            &self.db.frame(),
+            &refloc::Pose2::new(x, y, theta),
+            &lidar,
+        );
+        Ok((
+            PyArray1::from_vec(py, ranges),
+            lidar.angle_min,
+            lidar.angle_increment,
+        ))
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "RefDb('{}', sites={})",
+            self.path.display(),
+            self.db.site_count()
+        )
+    }
+}
+
+/// Localizes scans against one database, reusing its own scratch memory
+/// (sized for scans of up to `max_beams` beams).
+#[pyclass(module = "refloc")]
+struct Localizer {
+    db: Py<RefDb>,
+    scratch: Vec<u8>,
+}
+
+#[pymethods]
+impl Localizer {
+    #[new]
+    #[pyo3(signature = (db, max_beams=2048))]
+    fn new(db: Bound<'_, RefDb>, max_beams: usize) -> PyResult<Self> {
+        if max_beams == 0 || max_beams > 1 << 16 {
+            return Err(PyValueError::new_err(format!(
+                "max_beams must be 1..=65536, got {max_beams}"
+            )));
+        }
+        let size = refloc::scratch_size(db.get().db.params(), max_beams);
+        Ok(Localizer {
+            db: db.unbind(),
+            scratch: vec![0u8; size],
+        })
+    }
+
+    /// Localizes one scan: `ranges` (m; inf or nan for no return) of beams
+    /// at `angle_min + k * angle_increment` (rad, sensor frame,
+    /// counter-clockwise), as in `sensor_msgs/LaserScan`. A float32
+    /// contiguous array is read in place; anything else is converted. The
+    /// GIL is released while localizing.
+    #[pyo3(signature = (ranges, angle_min, angle_increment, range_min=0.0, range_max=30.0))]
+    fn localize(
+        &mut self,
+        ranges: PyArrayLike1<'_, f32, AllowTypeChange>,
+        angle_min: f32,
+        angle_increment: f32,
+        range_min: f32,
+        range_max: f32,
+    ) -> PyResult<Localization> {
+        let py = ranges.py();
+        let db = self.db.bind(py).get();
+        let view = ranges.as_slice()?;
+        let scratch = &mut self.scratch;
+        py.detach(|| {
+            let scan = refloc::Scan::Ranges(refloc::RangeScan {
+                angle_min,
+                angle_increment,
+                range_min,
+                range_max,
+                ranges: view,
+            });
+            refloc::localize(&db.db, &scan, scratch)
+                .map(|l| Localization::of(&l))
+                .map_err(|e| LocalizeError::new_err(e.to_string()))
+        })
+    }
+}
+
+/// One distinct pose hypothesis.
+#[pyclass(frozen, get_all, module = "refloc")]
+#[derive(Clone)]
+struct Hypothesis {
+    /// Robot x in the map frame (m).
+    x: f32,
+    /// Robot y in the map frame (m).
+    y: f32,
+    /// Robot heading in the map frame (rad).
+    theta: f32,
+    /// Probability (0-1) that this pose is right.
+    confidence: f32,
+}
+
+#[pymethods]
+impl Hypothesis {
+    fn __repr__(&self) -> String {
+        format!(
+            "Hypothesis(x={:.3}, y={:.3}, theta={:.4}, confidence={:.4})",
+            self.x, self.y, self.theta, self.confidence
+        )
+    }
+}
+
+/// The answer for one scan, as the runtime reports it.
+#[pyclass(frozen, get_all, module = "refloc")]
+struct Localization {
+    /// Robot x in the map frame (m).
+    x: f32,
+    /// Robot y in the map frame (m).
+    y: f32,
+    /// Robot heading in the map frame (rad).
+    theta: f32,
+    /// The pose is accepted (confidence at least the database's threshold).
+    accepted: bool,
+    /// Probability (0-1) that the pose is right.
+    confidence: f32,
+    /// Another distinct pose explains the scan nearly as well.
+    ambiguous: bool,
+    /// Distinct hypotheses, best first (the first is this pose).
+    hypotheses: Vec<Hypothesis>,
+    /// The reference site the pose came through.
+    site: u32,
+    /// Its coarse rank (0 = best).
+    coarse_rank: u32,
+    /// Vicinity score M and its threshold.
+    vicinity: f32,
+    vicinity_threshold: f32,
+    /// Evidence (M less the short-beam penalty).
+    evidence: f32,
+    /// Input beams with a return.
+    valid_points: u32,
+    /// Candidates examined.
+    candidates: usize,
+    cov: Option<[f32; 9]>,
+}
+
+impl Localization {
+    fn of(l: &refloc::Localization<'_>) -> Localization {
+        Localization {
+            x: l.pose.x,
+            y: l.pose.y,
+            theta: l.pose.theta,
+            accepted: l.accepted,
+            confidence: l.confidence,
+            ambiguous: l.ambiguous,
+            hypotheses: l
+                .hypotheses()
+                .iter()
+                .map(|h| Hypothesis {
+                    x: h.pose.x,
+                    y: h.pose.y,
+                    theta: h.pose.theta,
+                    confidence: h.confidence,
+                })
+                .collect(),
+            site: l.site,
+            coarse_rank: l.coarse_rank,
+            vicinity: l.vicinity,
+            vicinity_threshold: l.vicinity_threshold,
+            evidence: l.evidence,
+            valid_points: l.valid_points,
+            candidates: l.candidates.len(),
+            cov: l.covariance,
+        }
+    }
+}
+
+#[pymethods]
+impl Localization {
+    /// (x, y, theta) of the robot in the map frame (m, m, rad).
+    #[getter]
+    fn pose(&self) -> (f32, f32, f32) {
+        (self.x, self.y, self.theta)
+    }
+
+    /// 3x3 covariance of (x, y, theta) (m^2, m rad, rad^2), or None when
+    /// the fit could not give one.
+    #[getter]
+    fn covariance<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f32>>>> {
+        match self.cov {
+            Some(c) => Ok(Some(PyArray1::from_slice(py, &c).reshape([3, 3])?)),
+            None => Ok(None),
+        }
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Localization(x={:.3}, y={:.3}, theta={:.4}, accepted={}, confidence={:.4})",
+            self.x,
+            self.y,
+            self.theta,
+            if self.accepted { "True" } else { "False" },
+            self.confidence
+        )
+    }
+}
+
+/// Compiles the ROS map (`map_yaml`: map_server YAML with its PGM/PNG) into
+/// a `.refdb` at `out_path` with `mapc build`'s defaults except the options
+/// given; returns the number of reference sites. The GIL is released while
+/// compiling (which uses every core).
+#[pyfunction]
+#[pyo3(signature = (map_yaml, out_path, beams=362, range_max=30.0, seed=1, accept_confidence=0.8))]
+fn build(
+    py: Python<'_>,
+    map_yaml: PathBuf,
+    out_path: PathBuf,
+    beams: u32,
+    range_max: f32,
+    seed: u64,
+    accept_confidence: f32,
+) -> PyResult<usize> {
+    py.detach(|| {
+        let cfg = mapc::pipeline::BuildConfig {
+            beams,
+            range_max,
+            seed,
+            accept_confidence,
+            ..Default::default()
+        };
+        cfg.params().map_err(BuildError::new_err)?;
+        mapc::writer::check_output_path(&out_path, &[&map_yaml])
+            .map_err(|e| PyOSError::new_err(format!("{}: {e}", out_path.display())))?;
+        let src = mapc::mapfile::load_yaml(&map_yaml)
+            .map_err(|e| BuildError::new_err(format!("{}: {e}", map_yaml.display())))?;
+        let built = mapc::pipeline::build(&src, &cfg)
+            .map_err(|e| BuildError::new_err(format!("{}: {e}", map_yaml.display())))?;
+        let secs: Vec<_> = built
+            .sections
+            .iter()
+            .map(|(k, b)| (*k, b.as_slice()))
+            .collect();
+        mapc::writer::write_refdb(&out_path, &secs)
+            .map_err(|e| PyOSError::new_err(format!("{}: {e}", out_path.display())))?;
+        Ok(built.sites.len())
+    })
+}
+
+/// refloc: where am I on this map, from one laser scan, with no initial pose.
+#[pymodule(name = "refloc")]
+fn refloc_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<RefDb>()?;
+    m.add_class::<Localizer>()?;
+    m.add_class::<Localization>()?;
+    m.add_class::<Hypothesis>()?;
+    m.add_function(wrap_pyfunction!(build, m)?)?;
+    let py = m.py();
+    m.add("RefDbError", py.get_type::<RefDbError>())?;
+    m.add("LocalizeError", py.get_type::<LocalizeError>())?;
+    m.add("BuildError", py.get_type::<BuildError>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

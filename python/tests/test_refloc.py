@@ -1,0 +1,117 @@
+"""End-to-end tests of the refloc Python package: compile the shipped office
+map, localize scans simulated by `mapc eval --dump` (with their true poses),
+and check what the runtime reports and how errors surface."""
+import json
+import math
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import refloc
+
+ROOT = Path(os.environ.get("REFLOC_ROOT", Path(__file__).resolve().parents[2]))
+MAPC = os.environ.get("REFLOC_MAPC", str(ROOT / "target" / "release" / "mapc"))
+MAP = ROOT / "maps" / "office-demo" / "office-demo.yaml"
+
+
+@pytest.fixture(scope="module")
+def db_path(tmp_path_factory):
+    out = tmp_path_factory.mktemp("db") / "office.refdb"
+    sites = refloc.build(MAP, out)
+    assert sites > 10
+    return out
+
+
+@pytest.fixture(scope="module")
+def scans(db_path, tmp_path_factory):
+    """(LaserScan dict, true pose) pairs from `mapc eval --dump`."""
+    d = tmp_path_factory.mktemp("dump")
+    subprocess.run(
+        [MAPC, "eval", str(db_path), "--poses", "20", "--experiments", "static,dynamic",
+         "--no-figures", "--out", str(d / "eval"), "--dump", str(d)],
+        check=True, capture_output=True)
+    out = []
+    for run in ("static", "dynamic"):
+        lines = (d / f"{run}-scans.jsonl").read_text().splitlines()
+        truth = [list(map(float, l.split()[3:6])) for l in (d / f"{run}-truth.txt").read_text().splitlines()
+                 if l.strip() and not l.startswith("#")]
+        assert len(lines) == len(truth) == 20
+        out += [(json.loads(l), t) for l, t in zip(lines, truth)]
+    return out
+
+
+def ranges_of(s):
+    return np.array([math.inf if r is None else r for r in s["ranges"]], dtype=np.float32)
+
+
+def wrap(a):
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def test_localizes_simulated_scans_at_their_true_pose(db_path, scans):
+    db = refloc.RefDb(db_path)
+    loc = refloc.Localizer(db, max_beams=1024)
+    right = 0
+    for s, t in scans:
+        r = loc.localize(ranges_of(s), s["angle_min"], s["angle_increment"],
+                         range_min=s.get("range_min", 0.0), range_max=s["range_max"])
+        assert 0.0 <= r.confidence <= 1.0
+        assert r.accepted == (r.confidence >= db.accept_confidence)
+        assert 1 <= len(r.hypotheses) <= 5
+        h0 = r.hypotheses[0]
+        assert (h0.x, h0.y, h0.theta) == r.pose and h0.confidence == r.confidence
+        cov = r.covariance
+        assert cov is not None and cov.shape == (3, 3) and np.allclose(cov, cov.T)
+        assert np.all(np.diag(cov) > 0)
+        ok = math.hypot(r.x - t[0], r.y - t[1]) < 0.3 and abs(wrap(r.theta - t[2])) < math.radians(5)
+        right += r.accepted and ok
+    assert right >= 0.9 * len(scans), f"{right} of {len(scans)}"
+
+
+def test_refdb_localize_matches_the_localizer(db_path, scans):
+    db = refloc.RefDb(db_path)
+    s, _ = scans[0]
+    a = db.localize(ranges_of(s), s["angle_min"], s["angle_increment"], range_max=s["range_max"])
+    b = refloc.Localizer(db).localize(list(ranges_of(s).astype(float)), s["angle_min"],
+                                      s["angle_increment"], range_max=s["range_max"])
+    assert a.pose == b.pose and a.confidence == b.confidence
+
+
+def test_errors_are_python_exceptions_with_the_runtimes_message(db_path, tmp_path):
+    with pytest.raises(OSError):
+        refloc.RefDb(tmp_path / "missing.refdb")
+    bad = tmp_path / "bad.refdb"
+    bad.write_bytes(b"not a refdb at all, just some bytes" * 4)
+    with pytest.raises(refloc.RefDbError, match="bad.refdb"):
+        refloc.RefDb(bad)
+    db = refloc.RefDb(db_path)
+    with pytest.raises(refloc.LocalizeError):
+        db.localize(np.full(360, np.inf, dtype=np.float32), 0.0, 2 * math.pi / 360, range_max=30.0)
+    with pytest.raises(refloc.LocalizeError, match="angle"):
+        db.localize(np.ones(360, dtype=np.float32), 0.0, 0.0)
+    with pytest.raises(ValueError):
+        refloc.Localizer(db, max_beams=0)
+    with pytest.raises(refloc.BuildError):
+        refloc.build(tmp_path / "nope.yaml", tmp_path / "x.refdb")
+
+
+def test_simulated_scan_of_a_site_is_found_there(db_path):
+    db = refloc.RefDb(db_path)
+    x, y = db.site_position(db.site_count // 2)
+    ranges, amin, inc = db.simulate_scan(x, y, 0.5, beams=541, fov=math.radians(270))
+    assert ranges.dtype == np.float32 and ranges.shape == (541,)
+    r = db.localize(ranges, amin, inc, range_max=30.0)
+    assert r.accepted and math.hypot(r.x - x, r.y - y) < 0.1 and abs(wrap(r.theta - 0.5)) < 0.05
+    with pytest.raises(IndexError):
+        db.site_position(db.site_count)
+    with pytest.raises(ValueError):
+        db.simulate_scan(x, y, 0.0, beams=2)
+
+
+def test_quickstart_example_runs():
+    out = subprocess.run([os.sys.executable, str(ROOT / "python" / "examples" / "quickstart.py")],
+                         check=True, capture_output=True, text=True).stdout
+    assert "reference sites" in out and "Localization(" in out

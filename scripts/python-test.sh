@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Builds and installs the Python package (python/, PyO3 + maturin) into a
+# fresh virtual environment and runs its pytest tests.
+#
+#   scripts/python-test.sh
+#
+# The venv lives in python/target/venv (git-ignored). The tests compile the
+# shipped office map and localize scans that `mapc eval --dump` simulates,
+# so the mapc binary is built too. Exit status: pytest's, 2 on a setup error.
+set -euo pipefail
+unset CARGO_TARGET_DIR
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+VENV=$ROOT/python/target/venv
+say() { printf '== %s\n' "$*"; }
+say "building mapc (for the simulated test scans)"
+cargo build --quiet --release -p mapc --manifest-path "$ROOT/Cargo.toml"
+say "virtual environment $VENV"
+rm -rf "$VENV"
+python3 -m venv "$VENV" || { echo "error: python3 -m venv failed" >&2; exit 2; }
+"$VENV/bin/pip" install --quiet --upgrade pip
+"$VENV/bin/pip" install --quiet "maturin>=1.5,<2" "numpy>=2" "pytest>=7"
+say "pip install ./python (maturin builds the extension)"
+"$VENV/bin/pip" install --quiet "$ROOT/python"
+say "pytest"
+cd "$ROOT/python"
+REFLOC_MAPC="$ROOT/target/release/mapc" REFLOC_ROOT="$ROOT" "$VENV/bin/python" -m pytest -q tests
