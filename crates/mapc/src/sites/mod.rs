@@ -191,8 +191,12 @@ pub fn place_sites(
     for e in &gvd.edges {
         let mut chain: Vec<u32> = Vec::new();
         chain.extend(node_site.get(e.a as usize).copied().flatten());
+        // At most one site per cell of the edge: a spacing finer than the
+        // grid (or a huge resolution) cannot make more sites than cells.
         let segments = if spacing.is_finite() {
-            (e.length_m / spacing).ceil().max(1.0) as usize
+            (e.length_m / spacing)
+                .ceil()
+                .clamp(1.0, e.cells.len().max(1) as f64) as usize
         } else {
             1
         };

@@ -73,6 +73,23 @@ fn check_sites(g: &OccupancyGrid, b: &Built, opts: &SiteOptions) {
 }
 
 #[test]
+fn a_spacing_finer_than_the_grid_gives_at_most_a_site_per_edge_cell() {
+    let g = map(320, 50, &[(10, 10, 310, 40)], &[]);
+    let opts = SiteOptions {
+        edge_spacing_m: 1e-12,
+        ..SiteOptions::default()
+    };
+    let b = build(&g, &opts);
+    let cells: usize = b.gvd.edges.iter().map(|e| e.cells.len()).sum();
+    let on_edges = b.sites.iter().filter(|s| s.kind != SiteKind::Fill).count();
+    assert!(
+        on_edges <= cells + 2,
+        "{on_edges} sites on {cells} edge cells"
+    );
+    check_sites(&g, &b, &opts);
+}
+
+#[test]
 fn corridor_sites_are_evenly_spaced_and_chained() {
     // 15 m x 1.5 m corridor.
     let g = map(320, 50, &[(10, 10, 310, 40)], &[]);
