@@ -149,8 +149,8 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     let mut times: Vec<f64> = Vec::new();
     if text {
         out.line(&format!(
-            "{:<12} {:>4} {:>9} {:>9} {:>8} {:>6} {:>9} {:>8} {:>8} {:>8}",
-            "id", "ok", "x_m", "y_m", "theta", "site", "E", "M", "M_thr", "time_ms"
+            "{:<12} {:>4} {:>9} {:>9} {:>8} {:>6} {:>9} {:>8} {:>8} {:>6} {:>8}",
+            "id", "ok", "x_m", "y_m", "theta", "site", "E", "M", "M_thr", "conf", "time_ms"
         ))?;
     }
     for (k, item) in scanio::read_scans(reader, fmt, &opts).enumerate() {
@@ -277,7 +277,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                 }
                 if text {
                     out.line(&format!(
-                        "{:<12} {:>4} {:>9.3} {:>9.3} {:>8.4} {:>6} {:>9.1} {:>8.1} {:>8.1} {:>8.2}{}",
+                        "{:<12} {:>4} {:>9.3} {:>9.3} {:>8.4} {:>6} {:>9.1} {:>8.1} {:>8.1} {:>6.3} {:>8.2}{}",
                         scan.id,
                         if l.accepted { "yes" } else { "no" },
                         l.pose.x,
@@ -287,6 +287,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                         l.match_score,
                         l.vicinity,
                         l.vicinity_threshold,
+                        l.confidence,
                         time_us as f64 / 1000.0,
                         err.map(|(e, t)| format!("  err {:.3} m {:.2} deg", e, t.to_degrees())).unwrap_or_default()
                     ))?;
