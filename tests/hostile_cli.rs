@@ -368,3 +368,66 @@ fn build_refuses_an_output_that_is_an_input_or_a_special_file() {
         assert!(t.is_fifo(), "the FIFO was replaced by a file");
     }
 }
+
+#[test]
+fn render_synth_and_eval_refuse_outputs_that_are_inputs_or_special_files() {
+    let maps = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../maps/office-demo");
+    let dir = tempfile::tempdir().unwrap();
+    for f in ["office-demo.pgm", "office-demo.yaml"] {
+        std::fs::copy(maps.join(f), dir.path().join(f)).unwrap();
+    }
+    let pgm = std::fs::read(dir.path().join("office-demo.pgm")).unwrap();
+    let run = |args: &[&str]| mapc().current_dir(dir.path()).args(args).output().unwrap();
+    // render -o the map's own image.
+    let o = run(&["render", "office-demo.yaml", "-o", "office-demo.pgm"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("same file as the input"), "{}", text(&o));
+    assert_eq!(
+        std::fs::read(dir.path().join("office-demo.pgm")).unwrap(),
+        pgm
+    );
+    // synth into a name that is a directory.
+    std::fs::create_dir(dir.path().join("taken.pgm")).unwrap();
+    let o = run(&["synth", "--name", "taken", "-o", "."]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("not a regular file"), "{}", text(&o));
+    assert!(dir.path().join("taken.pgm").is_dir());
+    // eval --out a regular file, and a --check baseline that is the report
+    // the run would write.
+    let (db, _) = fixture();
+    let db = db.to_str().unwrap();
+    std::fs::write(dir.path().join("file"), b"x").unwrap();
+    let o = run(&[
+        "eval",
+        db,
+        "--out",
+        "file",
+        "--poses",
+        "2",
+        "--experiments",
+        "static",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("not a directory"), "{}", text(&o));
+    assert_eq!(std::fs::read(dir.path().join("file")).unwrap(), b"x");
+    std::fs::create_dir(dir.path().join("ev")).unwrap();
+    std::fs::write(dir.path().join("ev/report.json"), b"{}").unwrap();
+    let o = run(&[
+        "eval",
+        db,
+        "--out",
+        "ev",
+        "--check",
+        "ev/report.json",
+        "--poses",
+        "2",
+        "--experiments",
+        "static",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("same file as the input"), "{}", text(&o));
+    assert_eq!(
+        std::fs::read(dir.path().join("ev/report.json")).unwrap(),
+        b"{}"
+    );
+}

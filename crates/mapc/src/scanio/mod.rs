@@ -270,7 +270,10 @@ fn wrap_input<R: Read + 'static>(mut inner: R, gzip: bool) -> io::Result<Box<dyn
 /// `(scan_index, [x, y, theta])` in file order; a malformed line is an
 /// [`io::ErrorKind::InvalidData`] error naming the line.
 pub fn read_poses_in_map(path: impl AsRef<Path>) -> io::Result<Vec<(usize, [f64; 3])>> {
-    let path = path.as_ref();
+    read_poses_at_most(path.as_ref(), MAX_POSES)
+}
+
+fn read_poses_at_most(path: &Path, max: usize) -> io::Result<Vec<(usize, [f64; 3])>> {
     let gz = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("gz"));
@@ -319,10 +322,20 @@ pub fn read_poses_in_map(path: impl AsRef<Path>) -> io::Result<Vec<(usize, [f64;
                 pose[k - 2] = v;
             }
         }
+        if out.len() >= max {
+            return Err(bad(
+                line,
+                format!("more than {max} poses: not a poses-in-map file of one log"),
+            ));
+        }
         out.push((index, pose));
     }
     Ok(out)
 }
+
+/// Most poses [`read_poses_in_map`] reads (32 bytes each: 128 MiB), so a
+/// stream that never ends (a FIFO, a device) cannot exhaust memory.
+pub const MAX_POSES: usize = 4 << 20;
 
 /// One JSON Lines record for `scan` (no trailing newline), readable by
 /// [`read_scans`]: `NaN` and infinite ranges are written as `null`, `ranges`

@@ -1205,6 +1205,15 @@ fn poses_in_map_file() {
         assert_eq!(e.kind(), io::ErrorKind::InvalidData, "{bad}");
         assert!(e.to_string().contains("line 1"), "{e}");
     }
+    // A file (or stream) with more poses than the bound is refused at the
+    // first pose past it, naming the line.
+    std::fs::write(&p, "0 0 0 1 2 3\n".repeat(5)).unwrap();
+    let e = read_poses_at_most(&p, 3).unwrap_err();
+    assert!(
+        e.to_string().contains("line 4") && e.to_string().contains("more than 3"),
+        "{e}"
+    );
+    assert_eq!(read_poses_at_most(&p, 5).unwrap().len(), 5);
 }
 
 // ---------------------------------------------------------------------------

@@ -109,6 +109,19 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         Some(base) => Some(read_aux_text(base, "--check")?),
         None => None,
     };
+    // The output directory and its report must be writable places, checked
+    // before minutes of evaluation.
+    if a.out.exists() && !a.out.is_dir() {
+        return Err(input_err(anyhow::anyhow!(
+            "--out {}: not a directory",
+            a.out.display()
+        )));
+    }
+    let report_path = a.out.join("report.json");
+    let mut inputs: Vec<&std::path::Path> = vec![&a.db];
+    inputs.extend(a.check.as_deref());
+    mapc::writer::check_output_path(&report_path, &inputs)
+        .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", report_path.display())))?;
     let report = evaluate(&a, ui)?;
     std::fs::create_dir_all(&a.out)
         .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.out.display())))?;

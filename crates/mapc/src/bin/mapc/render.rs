@@ -38,6 +38,12 @@ pub struct Args {
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
     let src = load_map(&a.map, a.resolution, a.origin).map_err(input_err)?;
+    if let Some(out) = &a.output {
+        let mut inputs: Vec<&std::path::Path> = vec![&a.map, &src.image_path];
+        inputs.extend(src.yaml_path.as_deref());
+        mapc::writer::check_output_path(out, &inputs)
+            .map_err(|e| input_err(anyhow::anyhow!("-o {}: {e}", out.display())))?;
+    }
     let cfg = BuildOpts {
         fit_queries: 0,
         ..a.opts.clone()

@@ -79,6 +79,11 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         .name
         .clone()
         .unwrap_or_else(|| format!("{}-{}x{}-s{}", kind.as_str(), a.width, a.height, a.seed));
+    for ext in ["pgm", "yaml"] {
+        let f = a.out.join(format!("{name}.{ext}"));
+        mapc::writer::check_output_path(&f, &[])
+            .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", f.display())))?;
+    }
     let (yaml, _) = synth::write_ros_map(&a.out, &name, &map, a.origin.unwrap_or([0.0; 3]))
         .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.out.display())))?;
     ui.note(&format!(
