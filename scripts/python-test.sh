@@ -6,14 +6,18 @@
 #
 # The venv lives in python/target/venv (git-ignored). The tests compile the
 # shipped office map and localize scans that `mapc eval --dump` simulates,
-# so the mapc binary is built too. Exit status: pytest's, 2 on a setup error.
+# with the debug mapc binary (built by `cargo test`, or here when missing).
+# Exit status: pytest's, 2 on a setup error.
 set -euo pipefail
 unset CARGO_TARGET_DIR
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 VENV=$ROOT/python/target/venv
 say() { printf '== %s\n' "$*"; }
-say "building mapc (for the simulated test scans)"
-cargo build --quiet --release -p mapc --manifest-path "$ROOT/Cargo.toml"
+MAPC=$ROOT/target/debug/mapc
+if [ ! -x "$MAPC" ]; then
+    say "building mapc (for the simulated test scans)"
+    cargo build --quiet -p mapc --manifest-path "$ROOT/Cargo.toml"
+fi
 say "virtual environment $VENV"
 rm -rf "$VENV"
 python3 -m venv "$VENV" || { echo "error: python3 -m venv failed" >&2; exit 2; }
@@ -23,4 +27,4 @@ say "pip install ./python (maturin builds the extension)"
 "$VENV/bin/pip" install --quiet "$ROOT/python"
 say "pytest"
 cd "$ROOT/python"
-REFLOC_MAPC="$ROOT/target/release/mapc" REFLOC_ROOT="$ROOT" "$VENV/bin/python" -m pytest -q tests
+REFLOC_MAPC="$MAPC" REFLOC_ROOT="$ROOT" "$VENV/bin/python" -m pytest -q tests

@@ -218,6 +218,8 @@ fn symmetric_map_is_not_accepted_at_the_twin_place() {
         short_outliers: 0,
         swap_outliers: 0,
         disturbance: None,
+        prior_radius: 0.0,
+        prior_heading_tol: 0.0,
     };
     let trials = mapc::eval::run_e4(&db, &poses, &spec, 1, None, &|| {});
     let s = mapc::eval::summarize(&trials);

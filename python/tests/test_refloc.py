@@ -13,7 +13,7 @@ import pytest
 import refloc
 
 ROOT = Path(os.environ.get("REFLOC_ROOT", Path(__file__).resolve().parents[2]))
-MAPC = os.environ.get("REFLOC_MAPC", str(ROOT / "target" / "release" / "mapc"))
+MAPC = os.environ.get("REFLOC_MAPC", str(ROOT / "target" / "debug" / "mapc"))
 MAP = ROOT / "maps" / "office-demo" / "office-demo.yaml"
 
 

@@ -19,7 +19,7 @@
 use rayon::prelude::*;
 use refloc::raycast::{cast, BitGrid};
 use refloc::ssm::{self, SsmWork, DESC_LEN};
-use refloc::{localize, prep, scratch_size, MapFrame, Pose2, RangeScan, RefDb, Scan};
+use refloc::{prep, scratch_size, MapFrame, Pose2, RangeScan, RefDb, Scan};
 use serde::{Deserialize, Serialize};
 
 use crate::rng::Rng;
@@ -63,6 +63,15 @@ pub struct ScanSpec {
     /// A disturbance of the world or the scan ([`crate::disturb`]) applied
     /// before the noise and outliers above.
     pub disturbance: Option<crate::disturb::Class>,
+    /// A prior for every query (`refloc::Prior`): a region of this radius
+    /// (m; 0: none) whose centre is the true position moved by a seeded
+    /// random offset of up to half the radius ...
+    #[serde(default)]
+    pub prior_radius: f32,
+    /// ... and a heading window of +- this (rad; 0: none) around the true
+    /// heading moved by up to half of it.
+    #[serde(default)]
+    pub prior_heading_tol: f32,
 }
 
 impl ScanSpec {
@@ -442,6 +451,35 @@ pub fn e4_rng(seed: u64, k: usize) -> Rng {
     Rng::stream(seed ^ 0xE4, k as u64)
 }
 
+/// The prior of E4 pose `k` (see [`ScanSpec::prior_radius`]), from its own
+/// random stream (the scans do not change with it).
+pub fn e4_prior(spec: &ScanSpec, truth: &Pose2, seed: u64, k: usize) -> Option<refloc::Prior> {
+    if !(spec.prior_radius > 0.0 || spec.prior_heading_tol > 0.0) {
+        return None;
+    }
+    let mut rng = Rng::stream(seed ^ 0x0981_00E4, k as u64);
+    let mut p = refloc::Prior::NONE;
+    if spec.prior_radius > 0.0 {
+        let (d, a) = (
+            rng.range(0.0, 0.5 * spec.prior_radius as f64) as f32,
+            rng.range(-std::f64::consts::PI, std::f64::consts::PI) as f32,
+        );
+        p = refloc::Prior::circle(
+            truth.x + d * a.cos(),
+            truth.y + d * a.sin(),
+            spec.prior_radius,
+        );
+    }
+    if spec.prior_heading_tol > 0.0 {
+        let h = spec.prior_heading_tol as f64;
+        p = p.with_heading(
+            truth.theta + rng.range(-0.5 * h, 0.5 * h) as f32,
+            spec.prior_heading_tol,
+        );
+    }
+    Some(p)
+}
+
 /// Runs E4 on `poses` (robot poses) with scans simulated in `scan_grid`
 /// (`None`: the database's own grid) and returns one trial per pose.
 pub fn run_e4<D: AsRef<[u8]> + Sync>(
@@ -480,8 +518,9 @@ pub fn run_e4<D: AsRef<[u8]> + Sync>(
                         ranges: &s.ranges,
                     }),
                 };
+                let prior = e4_prior(spec, truth, seed, k);
                 let t0 = std::time::Instant::now();
-                let r = localize(db, &scan, scratch);
+                let r = refloc::localize_with_prior(db, &scan, scratch, prior);
                 let time_us = t0.elapsed().as_micros() as u64;
                 let mut trial = Trial {
                     truth: [truth.x as f64, truth.y as f64, truth.theta as f64],

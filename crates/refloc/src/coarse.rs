@@ -81,6 +81,28 @@ pub fn rank_sites<D: AsRef<[u8]>>(
     window: Option<usize>,
     top: &mut [Ranked],
 ) -> usize {
+    rank_sites_where(db, hist, window, top, None)
+}
+
+/// As [`rank_sites`], limited to the sites a prior considers
+/// ([`crate::prior::Prior::considers_site`]): with a region, only those
+/// sites are scored (exhaustively: a region holds few of them).
+pub fn rank_sites_where<D: AsRef<[u8]>>(
+    db: &crate::RefDb<D>,
+    hist: &[f32],
+    window: Option<usize>,
+    top: &mut [Ranked],
+    prior: Option<&crate::prior::Prior>,
+) -> usize {
+    if let Some(p) = prior.filter(|p| p.has_region()) {
+        let mut n = 0;
+        for s in 0..db.site_count() {
+            if p.considers_site(db.site_xy(s)) {
+                insert_unique(top, &mut n, s as u32, site_score(db, hist, window, s));
+            }
+        }
+        return n;
+    }
     use crate::index::ViewKind;
     let kind = match window {
         None => ViewKind::Full,

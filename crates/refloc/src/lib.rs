@@ -59,6 +59,7 @@ pub mod math;
 pub mod params;
 pub mod pgr;
 pub mod prep;
+pub mod prior;
 pub mod rank;
 pub mod raycast;
 pub mod refine;
@@ -73,12 +74,13 @@ pub use confidence::Decision;
 pub use db::{DbError, DbErrorKind, RefDb};
 pub use frame::{wrap_angle, MapFrame, Pose2};
 pub use localize::{
-    localize, scratch_size, Candidate, Hypothesis, Localization, LocalizeError, Localizer,
-    Prepared, RangeScan, Scan, MAX_HYPOTHESES,
+    localize, localize_with_prior, scratch_size, Candidate, Hypothesis, Localization,
+    LocalizeError, Localizer, Prepared, RangeScan, Scan, MAX_HYPOTHESES,
 };
 #[cfg(feature = "mmap")]
 pub use mmap::{map_file, open_mmap, OpenError};
 pub use params::{BadParam, Params, Selection, SensorModel};
+pub use prior::Prior;
 
 #[cfg(test)]
 mod tests;

@@ -15,6 +15,7 @@ use crate::confidence::Decision;
 use crate::db::RefDb;
 use crate::params::Params;
 use crate::prep;
+use crate::prior::Prior;
 use crate::raycast::BitGrid;
 use crate::refine::{self, DistMap};
 use crate::select::{self, Next, Search};
@@ -101,11 +102,13 @@ pub enum LocalizeError {
         /// Needed.
         needed: usize,
     },
-    /// No candidate site produced a pose.
+    /// No candidate site produced a pose (with a prior: none inside it).
     NoMatch {
         /// Candidates examined.
         candidates: usize,
     },
+    /// A prior whose numbers make no sense ([`Prior::is_valid`]).
+    BadPrior,
 }
 
 impl fmt::Display for LocalizeError {
@@ -127,6 +130,10 @@ impl fmt::Display for LocalizeError {
             LocalizeError::NoMatch { candidates } => {
                 write!(f, "no candidate site matched ({candidates} examined)")
             }
+            LocalizeError::BadPrior => write!(
+                f,
+                "unusable prior: the centre and heading must be finite, the radius > 0 m, the heading tolerance >= 0 rad"
+            ),
         }
     }
 }
@@ -449,6 +456,7 @@ pub struct Localizer<'d, 's, D: AsRef<[u8]>> {
     cells: usize,
     ranked: usize,
     nc: usize,
+    prior: Option<Prior>,
 }
 
 impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
@@ -491,7 +499,20 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
             cells: 0,
             ranked: 0,
             nc: 0,
+            prior: None,
         })
+    }
+
+    /// Limits the following queries to a region and heading window
+    /// ([`crate::prior`]); `None` (the default) considers the whole map.
+    /// An invalid prior ([`Prior::is_valid`]) is refused with
+    /// [`LocalizeError::BadPrior`].
+    pub fn set_prior(&mut self, prior: Option<Prior>) -> Result<(), LocalizeError> {
+        if prior.is_some_and(|p| !p.is_valid()) {
+            return Err(LocalizeError::BadPrior);
+        }
+        self.prior = prior;
+        Ok(())
     }
 
     /// Stage 1: loads `scan` (beam-ordered points, counter-clockwise),
@@ -554,7 +575,13 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     pub fn rank_sites(&mut self) -> usize {
         let p = self.params;
         let b = &mut self.b;
-        self.ranked = coarse::rank_sites(self.db, &b.hist[..self.cells], self.window, b.top);
+        self.ranked = coarse::rank_sites_where(
+            self.db,
+            &b.hist[..self.cells],
+            self.window,
+            b.top,
+            self.prior.as_ref(),
+        );
         self.nc = coarse::candidate_count(
             &b.top[..self.ranked],
             p.nc_min as usize,
@@ -667,6 +694,10 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
                 evidence: v.evidence(p.short_weight, p.occlusion_fit),
                 ..cand
             };
+            // A pose the prior rules out is no answer.
+            if self.prior.is_some_and(|pr| !pr.allows(&robot)) {
+                cand.has_pose = 0;
+            }
         }
         self.b.cands[c] = cand;
         Some(cand)
@@ -813,7 +844,20 @@ pub fn localize<'s, D: AsRef<[u8]>>(
     scan: &Scan<'_>,
     scratch: &'s mut [u8],
 ) -> Result<Localization<'s>, LocalizeError> {
+    localize_with_prior(db, scan, scratch, None)
+}
+
+/// As [`localize`], with an optional [`Prior`]: sites outside its region
+/// are not ranked and poses outside its region or heading window are not
+/// answers. `None` is [`localize`].
+pub fn localize_with_prior<'s, D: AsRef<[u8]>>(
+    db: &RefDb<D>,
+    scan: &Scan<'_>,
+    scratch: &'s mut [u8],
+    prior: Option<Prior>,
+) -> Result<Localization<'s>, LocalizeError> {
     let mut loc = Localizer::new(db, scratch, scan.len())?;
+    loc.set_prior(prior)?;
     loc.prepare(scan)?;
     let nc = loc.rank();
     let mut search = Search::new(db.params());

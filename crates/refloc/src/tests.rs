@@ -1293,3 +1293,39 @@ fn localize_rejects_range_min_not_below_range_max() {
         );
     }
 }
+
+#[test]
+fn a_prior_limits_the_answer_to_its_region_and_heading_window() {
+    use crate::{localize_with_prior, Prior};
+    let buf = tiny_db();
+    let db = RefDb::new(buf.bytes()).unwrap();
+    let (truth, ranges) = truth_and_scan();
+    let mut scratch = vec![0u8; scratch_size(db.params(), ranges.len())];
+    let run = |prior: Option<Prior>, scratch: &mut [u8]| {
+        localize_with_prior(&db, &ranges_scan(&ranges), scratch, prior)
+            .map(|l| (l.pose, l.accepted, l.candidates.len()))
+    };
+    let (free, ..) = run(None, &mut scratch).unwrap();
+    // Around the truth, the right heading: the same answer.
+    let near = Prior::circle(truth.x + 0.5, truth.y, 1.5).with_heading(truth.theta, 0.3);
+    let (p, accepted, _) = run(Some(near), &mut scratch).unwrap();
+    assert!(accepted && (p.x - free.x).abs() < 1e-4 && (p.y - free.y).abs() < 1e-4);
+    // A heading window that excludes the truth: no answer is the truth.
+    let wrong_heading = Prior::NONE.with_heading(truth.theta + 2.0, 0.3);
+    match run(Some(wrong_heading), &mut scratch) {
+        Ok((p, ..)) => assert!(wrong_heading.allows(&p), "{p:?} outside the window"),
+        Err(e) => assert!(matches!(e, LocalizeError::NoMatch { .. }), "{e}"),
+    }
+    // A region far from every site ranks none.
+    let nowhere = Prior::circle(1000.0, 1000.0, 1.0);
+    assert!(matches!(
+        run(Some(nowhere), &mut scratch),
+        Err(LocalizeError::NoMatch { candidates: 0 })
+    ));
+    // Nonsense is refused.
+    let bad = Prior::circle(0.0, 0.0, -1.0);
+    assert_eq!(
+        run(Some(bad), &mut scratch).unwrap_err(),
+        LocalizeError::BadPrior
+    );
+}

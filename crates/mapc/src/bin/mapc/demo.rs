@@ -93,6 +93,8 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         seed: a.seed,
         clearance: 0.3,
         beams: 362,
+        prior_radius: 0.0,
+        prior_heading_tol: 0.0,
         fov: 360.0,
         range_max: 30.0,
         noise: 0.005,

@@ -49,6 +49,14 @@ pub struct Args {
         value_delimiter = ','
     )]
     pub experiments: Vec<String>,
+    /// E4 runs with a prior region of this radius (m) around each true pose
+    /// (its centre moved by up to half the radius; 0: no region).
+    #[arg(long, default_value_t = 0.0, value_name = "M")]
+    pub prior_radius: f32,
+    /// E4 runs with a prior heading window of +- this (degrees) around each
+    /// true heading (moved by up to half of it; 0: no window).
+    #[arg(long, default_value_t = 0.0, value_name = "DEG")]
+    pub prior_heading_tol: f32,
     /// E1 trials (paper: 500).
     #[arg(long, default_value_t = 500)]
     pub e1_trials: usize,
@@ -220,6 +228,8 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
         short_outliers: short,
         swap_outliers: swap,
         disturbance: None,
+        prior_radius: a.prior_radius,
+        prior_heading_tol: a.prior_heading_tol.to_radians(),
     };
     let poses = eval::sample_poses(&db, a.poses, a.clearance, a.seed);
     if poses.is_empty() {

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use mapc::scanio::{self, InputFormat, ReadOptions, ScanData};
-use refloc::{localize, scratch_size, RangeScan, Scan};
+use refloc::{scratch_size, RangeScan, Scan};
 use serde_json::json;
 
 use crate::util::{fail_err, input_err, open_db, Check, CliError, CliResult, Ui};
@@ -106,6 +106,13 @@ pub struct Args {
     /// Leave the candidate list out of the JSON output.
     #[arg(long)]
     pub no_candidates: bool,
+    /// Prior region: the robot is within R m of (X, Y) (map frame); sites
+    /// outside it (plus 2 m) are not ranked, poses outside it are no answer.
+    #[arg(long, value_name = "X,Y,R", value_delimiter = ',', num_args = 3)]
+    pub prior: Option<Vec<f32>>,
+    /// Prior heading window: the robot faces THETA +- TOL degrees (map frame).
+    #[arg(long, value_name = "THETA,TOL", value_delimiter = ',', num_args = 2)]
+    pub prior_heading: Option<Vec<f32>>,
 }
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
@@ -128,6 +135,22 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         range_max: a.range_max,
         ..ReadOptions::default()
     };
+    let mut prior = a
+        .prior
+        .as_ref()
+        .map(|v| refloc::Prior::circle(v[0], v[1], v[2]));
+    if let Some(h) = &a.prior_heading {
+        prior = Some(
+            prior
+                .unwrap_or(refloc::Prior::NONE)
+                .with_heading(h[0].to_radians(), h[1].to_radians()),
+        );
+    }
+    if prior.is_some_and(|p| !p.is_valid()) {
+        return Err(input_err(anyhow::anyhow!(
+            "--prior X,Y,R needs finite X, Y and R > 0 m; --prior-heading THETA,TOL a finite THETA and TOL >= 0 degrees"
+        )));
+    }
     let truth: HashMap<usize, [f64; 3]> = match &a.truth {
         Some(p) => scanio::read_poses_in_map(p)
             .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", p.display())))?
@@ -199,7 +222,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             },
         };
         let t0 = Instant::now();
-        let r = localize(&db, &input, &mut scratch);
+        let r = refloc::localize_with_prior(&db, &input, &mut scratch, prior);
         let time_us = t0.elapsed().as_micros() as u64;
         times.push(time_us as f64);
         // The truth index is the scan's position among the laser lines.
