@@ -96,7 +96,8 @@ impl RefDb {
         range_max: f32,
     ) -> PyResult<Localization> {
         let beams = ranges.len()?;
-        let mut loc = Localizer::new(slf, beams)?;
+        // At least one beam of scratch: an empty scan is the runtime's error to report.
+        let mut loc = Localizer::new(slf, beams.max(1))?;
         loc.localize(ranges, angle_min, angle_increment, range_min, range_max)
     }
 
@@ -354,6 +355,9 @@ fn build(
             .map_err(|e| PyOSError::new_err(format!("{}: {e}", out_path.display())))?;
         let src = mapc::mapfile::load_yaml(&map_yaml)
             .map_err(|e| BuildError::new_err(format!("{}: {e}", map_yaml.display())))?;
+        // The image the YAML names is an input too.
+        mapc::writer::check_output_path(&out_path, &src.input_files())
+            .map_err(|e| PyOSError::new_err(format!("{}: {e}", out_path.display())))?;
         let built = mapc::pipeline::build(&src, &cfg)
             .map_err(|e| BuildError::new_err(format!("{}: {e}", map_yaml.display())))?;
         let secs: Vec<_> = built

@@ -7,11 +7,11 @@
 //! pose), so a run is reproducible. Distances are metres, angles radians,
 //! poses in the map frame.
 
-use refloc::raycast::{cast, BitGrid};
+use refloc::raycast::BitGrid;
 use refloc::{MapFrame, Pose2};
 
 use crate::rng::Rng;
-use crate::sim::Lidar;
+use crate::sim::{beam_range as beam, Lidar};
 
 /// A class of disturbance.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -77,17 +77,6 @@ impl Class {
 
 /// Sweep time of a scan for [`Class::MotionDistortion`] (s).
 pub const SWEEP_S: f32 = 0.1;
-
-/// One beam cast in `grid` from `origin` (map frame) at map-frame angle
-/// `angle`: the range (m) or `INFINITY`.
-fn beam(grid: &BitGrid<'_>, frame: &MapFrame, origin: [f32; 2], angle: f32, range_max: f32) -> f32 {
-    let uv = frame.to_cells(origin);
-    let a = frame.angle_to_cells(angle);
-    match cast(grid, uv[0], uv[1], a, range_max / frame.resolution) {
-        Some(t) => t * frame.resolution,
-        None => f32::INFINITY,
-    }
-}
 
 /// The ranges (m, `INFINITY`: no return) of `lidar` at sensor pose `sensor`
 /// in the map's world disturbed by `class`.

@@ -66,17 +66,34 @@ pub fn virtual_scan(
     sensor: &Pose2,
     lidar: &Lidar,
 ) -> Vec<f32> {
-    let uv = frame.to_cells([sensor.x, sensor.y]);
-    let max_cells = lidar.range_max / frame.resolution;
     (0..lidar.beams)
         .map(|k| {
-            let a = frame.angle_to_cells(sensor.theta + lidar.angle(k));
-            match cast(grid, uv[0], uv[1], a, max_cells) {
-                Some(t) => t * frame.resolution,
-                None => f32::INFINITY,
-            }
+            beam_range(
+                grid,
+                frame,
+                [sensor.x, sensor.y],
+                sensor.theta + lidar.angle(k),
+                lidar.range_max,
+            )
         })
         .collect()
+}
+
+/// The range (m; `INFINITY` for no return within `range_max`) of one beam
+/// from `origin` (map frame, m) at map-frame angle `angle` (rad).
+pub fn beam_range(
+    grid: &BitGrid<'_>,
+    frame: &MapFrame,
+    origin: [f32; 2],
+    angle: f32,
+    range_max: f32,
+) -> f32 {
+    let uv = frame.to_cells(origin);
+    let a = frame.angle_to_cells(angle);
+    match cast(grid, uv[0], uv[1], a, range_max / frame.resolution) {
+        Some(t) => t * frame.resolution,
+        None => f32::INFINITY,
+    }
 }
 
 /// Adds noise to `ranges` in place.

@@ -65,7 +65,8 @@ pub fn features(cands: &[Candidate], c: &Candidate) -> Features {
     if c.has_pose == 0 {
         return Features::default();
     }
-    let max = verify::ratio(1.0, c.pairs);
+    // 1 / (HIT_SCORE N_P): scores times this are shares of their maximum.
+    let per_max = verify::ratio(1.0, c.pairs);
     let mut alt = 0.0f32;
     let mut support = 0u32;
     for o in cands.iter().filter(|o| o.has_pose != 0) {
@@ -78,8 +79,8 @@ pub fn features(cands: &[Candidate], c: &Candidate) -> Features {
         }
     }
     Features {
-        evidence_ratio: c.evidence * max,
-        margin: (c.evidence - alt) * max,
+        evidence_ratio: c.evidence * per_max,
+        margin: (c.evidence - alt) * per_max,
         support: support.max(1),
         through_share: if c.pairs == 0 {
             0.0

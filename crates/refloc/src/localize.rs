@@ -721,23 +721,19 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     ) -> Result<Localization<'s>, LocalizeError> {
         let nc = examined.min(self.nc);
         let cands: &'s [Candidate] = &self.b.cands[..nc];
-        let best = search.best().filter(|&b| b < nc);
-        let c = best
-            .map(|b| cands[b])
+        let best = search
+            .best()
+            .filter(|&b| b < nc)
             .ok_or(LocalizeError::NoMatch { candidates: nc })?;
+        let c = cands[best];
         let pose = Pose2::new(c.x, c.y, c.theta);
         let p = self.params;
         let ambiguous = select::ambiguous(cands, &c, p.ambiguity_ratio);
         let model = self.db.decision();
         let decision = model.unwrap_or(Decision::DEFAULT);
         let mut hypotheses = [Hypothesis::default(); MAX_HYPOTHESES];
-        let hypothesis_count = select::hypotheses(
-            cands,
-            best.unwrap_or(0),
-            p.selection,
-            &decision,
-            &mut hypotheses,
-        );
+        let hypothesis_count =
+            select::hypotheses(cands, best, p.selection, &decision, &mut hypotheses);
         let confidence = select::capped_confidence(hypotheses[0].confidence, ambiguous);
         hypotheses[0].confidence = confidence;
         let accepted = match model {

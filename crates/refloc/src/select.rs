@@ -204,14 +204,10 @@ impl Search {
         {
             self.best = Some(c);
         }
-        let best_ok = self.best.is_some_and(|b| {
-            let bc = &cands[b];
-            bc.free_space_ok != 0 && bc.evidence > bc.vicinity_threshold
-        });
+        let best_ok = self.best.is_some_and(|b| passes(&cands[b]));
         let confident = explained_ratio(cand) >= self.early_accept
             && cand.short_beams * EARLY_SHORT_SHARE <= cand.pairs
-            && cand.evidence > cand.vicinity_threshold
-            && cand.free_space_ok != 0;
+            && passes(cand);
         let done = self.selection == Selection::Vicinity
             && self.early_accept > 0.0
             && (confident || (self.early_min > 0 && c + 1 >= self.early_min && best_ok));
@@ -258,7 +254,7 @@ pub fn accepted_with(best: &Candidate, confidence: f32, decision: &Decision) -> 
 /// The decision in a database without a model: it passes ([`passes`]) and
 /// is not ambiguous.
 pub fn accepted(best: &Candidate, ambiguous: bool) -> bool {
-    best.evidence > best.vicinity_threshold && best.free_space_ok != 0 && !ambiguous
+    passes(best) && !ambiguous
 }
 
 #[cfg(test)]

@@ -245,6 +245,17 @@ pub struct MapSource {
     pub mode: Mode,
 }
 
+impl MapSource {
+    /// The files the map was read from (the image, and the YAML when there
+    /// is one): an output must never be one of them
+    /// ([`crate::writer::check_output_path`]).
+    pub fn input_files(&self) -> Vec<&Path> {
+        let mut v: Vec<&Path> = vec![&self.image_path];
+        v.extend(self.yaml_path.as_deref());
+        v
+    }
+}
+
 /// Why a map could not be loaded. Every variant names the offending file.
 #[derive(Debug, thiserror::Error)]
 pub enum MapError {

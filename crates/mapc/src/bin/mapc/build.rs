@@ -226,9 +226,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     let mut laps = pipeline::Laps::start();
     let src = load_map(&a.map, a.resolution, a.origin).map_err(input_err)?;
     // The image (and the YAML) the map named are inputs too.
-    let mut inputs: Vec<&std::path::Path> = vec![&src.image_path];
-    inputs.extend(src.yaml_path.as_deref());
-    mapc::writer::check_output_path(&out, &inputs).map_err(refuse_out)?;
+    mapc::writer::check_output_path(&out, &src.input_files()).map_err(refuse_out)?;
     laps.lap("load");
     sp.set_message("compiling");
     let mut built = pipeline::build(&src, &cfg)

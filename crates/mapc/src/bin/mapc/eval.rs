@@ -133,13 +133,12 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     let report = evaluate(&a, ui)?;
     std::fs::create_dir_all(&a.out)
         .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.out.display())))?;
-    let path = a.out.join("report.json");
     std::fs::write(
-        &path,
+        &report_path,
         serde_json::to_string_pretty(&report).unwrap_or_default(),
     )
-    .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", path.display())))?;
-    ui.note(&format!("report: {}", path.display()));
+    .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", report_path.display())))?;
+    ui.note(&format!("report: {}", report_path.display()));
     if let (Some(base), Some(text)) = (&a.check, baseline) {
         let b: Value = serde_json::from_str(&text)
             .map_err(|e| input_err(anyhow::anyhow!("{}: not a report: {e}", base.display())))?;

@@ -39,8 +39,8 @@ pub struct Args {
 pub fn run(a: Args, ui: &Ui) -> CliResult {
     let src = load_map(&a.map, a.resolution, a.origin).map_err(input_err)?;
     if let Some(out) = &a.output {
-        let mut inputs: Vec<&std::path::Path> = vec![&a.map, &src.image_path];
-        inputs.extend(src.yaml_path.as_deref());
+        let mut inputs = src.input_files();
+        inputs.push(&a.map);
         mapc::writer::check_output_path(out, &inputs)
             .map_err(|e| input_err(anyhow::anyhow!("-o {}: {e}", out.display())))?;
     }
