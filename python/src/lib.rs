@@ -248,7 +248,8 @@ struct Localization {
     confidence: f32,
     /// Another distinct pose explains the scan nearly as well.
     ambiguous: bool,
-    /// Distinct hypotheses, best first (the first is this pose).
+    /// Distinct hypotheses: this pose first, then the alternatives by
+    /// probability, highest first.
     hypotheses: Vec<Hypothesis>,
     /// The reference site the pose came through.
     site: u32,

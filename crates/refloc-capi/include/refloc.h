@@ -293,7 +293,8 @@ typedef struct refloc_result {
     uint32_t hypothesis_count;
     /*
      The top distinct pose hypotheses (at least 1 m or 20 degrees apart),
-     best first; the first is the pose above.
+     the first is the pose above, the alternatives follow by probability,
+     highest first.
      */
     struct refloc_hypothesis hypotheses[5];
 } refloc_result;

@@ -186,7 +186,8 @@ pub struct refloc_result {
     /// Entries of `hypotheses` in use (1-5).
     pub hypothesis_count: u32,
     /// The top distinct pose hypotheses (at least 1 m or 20 degrees apart),
-    /// best first; the first is the pose above.
+    /// the first is the pose above, the alternatives follow by probability,
+    /// highest first.
     pub hypotheses: [refloc_hypothesis; 5],
 }
 

@@ -241,8 +241,9 @@ pub struct Localization<'s> {
     pub covariance: Option<[f32; 9]>,
     /// The top distinct hypotheses (poses at least
     /// [`crate::select::DISTINCT_DISTANCE`] or
-    /// [`crate::select::DISTINCT_HEADING`] apart), best first, the first
-    /// `hypothesis_count` entries; the first is `pose`.
+    /// [`crate::select::DISTINCT_HEADING`] apart), the first
+    /// `hypothesis_count` entries: the first is `pose`, the alternatives
+    /// follow by probability, highest first.
     pub hypotheses: [Hypothesis; MAX_HYPOTHESES],
     /// Entries of `hypotheses` in use (1..=[`MAX_HYPOTHESES`]).
     pub hypothesis_count: usize,
@@ -264,7 +265,8 @@ pub struct Localization<'s> {
 }
 
 impl Localization<'_> {
-    /// The distinct hypotheses, best first.
+    /// The distinct hypotheses: the answer, then the alternatives by
+    /// probability, highest first.
     pub fn hypotheses(&self) -> &[Hypothesis] {
         &self.hypotheses[..self.hypothesis_count.min(MAX_HYPOTHESES)]
     }

@@ -81,8 +81,11 @@ pub fn passes(c: &Candidate) -> bool {
 /// candidate `best` (the answer), then repeatedly the best candidate with a
 /// pose (by [`better`]) that is distinct from every one chosen, each with
 /// its probability under `decision`. Returns how many (0 when `best` has no
-/// pose). The probabilities are each a hypothesis's own; they need not sum
-/// to 1 (several may all be unlikely).
+/// pose). The alternatives after the answer are then ordered by their
+/// probability, highest first (ties keep the [`better`] order), so a reader
+/// of the list sees the likeliest alternative second. The probabilities are
+/// each a hypothesis's own; they need not sum to 1 (several may all be
+/// unlikely).
 pub fn hypotheses(
     cands: &[Candidate],
     best: usize,
@@ -111,6 +114,14 @@ pub fn hypotheses(
             if new && next.is_none_or(|p| better(o, &cands[p], selection)) {
                 next = Some(k);
             }
+        }
+    }
+    // Stable insertion sort of the alternatives (at most a handful).
+    for i in 2..n {
+        let mut j = i;
+        while j > 1 && out[j].confidence > out[j - 1].confidence {
+            out.swap(j, j - 1);
+            j -= 1;
         }
     }
     n
@@ -336,6 +347,34 @@ mod tests {
             free_space_ok: 1,
             ..Candidate::default()
         }
+    }
+
+    #[test]
+    fn alternatives_are_listed_by_probability() {
+        // The answer, then an alternative with more evidence but most of its
+        // beams through walls (unlikely), then a cleaner one with less
+        // evidence (likelier): the list shows the likelier one second.
+        let mut through = cand(5.0, 0.0, 0.0, 75.0, 0);
+        through.through_beams = 15;
+        let cands = [
+            cand(0.0, 0.0, 0.0, 80.0, 0),
+            through,
+            cand(0.0, 5.0, 0.0, 60.0, 0),
+        ];
+        let mut h = [Hypothesis::default(); 5];
+        let n = hypotheses(&cands, 0, Selection::Vicinity, &Decision::DEFAULT, &mut h);
+        assert_eq!(n, 3);
+        assert_eq!(h[0].candidate, 0, "the answer stays first");
+        let (p1, p2) = (h[1].confidence, h[2].confidence);
+        assert!(p1 >= p2, "{p1} {p2}");
+        let mut alt: Vec<u32> = h[1..n].iter().map(|x| x.candidate).collect();
+        alt.sort_unstable();
+        assert_eq!(alt, [1, 2], "the same alternatives, whatever their order");
+        // The two orders really differ here (else the test shows nothing).
+        let pt = Decision::DEFAULT.probability(&confidence::features(&cands, &cands[1]));
+        let pc = Decision::DEFAULT.probability(&confidence::features(&cands, &cands[2]));
+        assert!(pc > pt, "{pc} {pt}");
+        assert_eq!(h[1].candidate, 2);
     }
 
     #[test]
