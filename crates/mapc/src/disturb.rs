@@ -36,6 +36,11 @@ pub enum Class {
     RangeNoise,
     /// Each beam's true angle off its nominal one by N(0, 0.2 degree).
     AngularJitter,
+    /// 1-3 doors toggled within 1-8 m: a doorway-wide gap (0.6-1.2 m
+    /// between walls) closed by a wall the map lacks, or a stretch of
+    /// 0.8-1.0 m of a thin wall (at most 0.25 m thick, free on both sides)
+    /// opened where the map has it closed.
+    DoorsToggled,
     /// The scan taken while turning at up to 1 rad/s over a 0.1 s sweep,
     /// reported as if taken at the sweep's middle (the true pose).
     #[serde(rename = "motion")]
@@ -44,10 +49,11 @@ pub enum Class {
 
 impl Class {
     /// Every class, in report order.
-    pub const ALL: [Class; 8] = [
+    pub const ALL: [Class; 9] = [
         Class::People,
         Class::FurnitureAdded,
         Class::FurnitureRemoved,
+        Class::DoorsToggled,
         Class::Shifted,
         Class::MissingReturns,
         Class::RangeNoise,
@@ -61,6 +67,7 @@ impl Class {
             Class::People => "people",
             Class::FurnitureAdded => "furniture-added",
             Class::FurnitureRemoved => "furniture-removed",
+            Class::DoorsToggled => "doors",
             Class::Shifted => "shifted",
             Class::MissingReturns => "missing-returns",
             Class::RangeNoise => "range-noise",
@@ -145,11 +152,8 @@ pub fn scan(
             ranges
         }
         Class::FurnitureRemoved => {
-            let mut words = grid.words().to_vec();
-            let (w, h) = (
-                refloc::raycast::Occupancy::width(grid),
-                refloc::raycast::Occupancy::height(grid),
-            );
+            let mut world = Cells::of(grid);
+            let (w, h) = (world.w as i64, world.h as i64);
             let blocks = 1 + rng.below(3) as usize;
             let mut erased = 0;
             // Look for obstacle cells near the sensor to erase around.
@@ -158,29 +162,43 @@ pub fn scan(
                     break;
                 }
                 let (d, a) = (rng.range(0.5, 8.0) as f32, rng.range(-3.15, 3.15) as f32);
-                let p = frame.to_cells([xy[0] + d * a.cos(), xy[1] + d * a.sin()]);
-                let (cx, cy) = (p[0].floor() as i64, p[1].floor() as i64);
-                if cx < 0 || cy < 0 || cx >= w as i64 || cy >= h as i64 {
+                let Some((cx, cy)) = world.cell(frame, [xy[0] + d * a.cos(), xy[1] + d * a.sin()])
+                else {
+                    continue;
+                };
+                if !refloc::raycast::Occupancy::blocked(grid, cx, cy) {
                     continue;
                 }
-                if !refloc::raycast::Occupancy::blocked(grid, cx as u32, cy as u32) {
-                    continue;
-                }
+                let (cx, cy) = (cx as i64, cy as i64);
                 let half = (rng.range(0.25, 0.5) as f32 / frame.resolution).ceil() as i64;
-                for y in (cy - half).max(0)..(cy + half + 1).min(h as i64) {
-                    for x in (cx - half).max(0)..(cx + half + 1).min(w as i64) {
-                        let bit = y as usize * w as usize + x as usize;
-                        if let Some(word) = words.get_mut(bit / 32) {
-                            *word &= !(1u32 << (bit % 32));
-                        }
+                for y in (cy - half).max(0)..(cy + half + 1).min(h) {
+                    for x in (cx - half).max(0)..(cx + half + 1).min(w) {
+                        world.set(x as u32, y as u32, false);
                     }
                 }
                 erased += 1;
             }
-            match BitGrid::new(w, h, &words) {
-                Some(g) => exact(&g),
-                None => exact(grid),
+            world.cast(grid, exact)
+        }
+        Class::DoorsToggled => {
+            let mut world = Cells::of(grid);
+            let toggles = 1 + rng.below(3) as usize;
+            let mut done = 0;
+            for _ in 0..400 {
+                if done == toggles {
+                    break;
+                }
+                let (d, a) = (rng.range(1.0, 8.0) as f32, rng.range(-3.15, 3.15) as f32);
+                let p = [xy[0] + d * a.cos(), xy[1] + d * a.sin()];
+                let across = rng.range(0.0, std::f64::consts::PI) as f32;
+                let toggled = if world.blocked_at(frame, p) {
+                    open_door(&mut world, grid, frame, p, across, rng)
+                } else {
+                    close_door(&mut world, grid, frame, xy, p, across)
+                };
+                done += toggled as usize;
             }
+            world.cast(grid, exact)
         }
         Class::Shifted => {
             let shift = Pose2::new(
@@ -260,6 +278,162 @@ pub fn scan(
     }
 }
 
+/// Widest gap (m) a closed door fills, and the narrowest.
+const DOOR_GAP: [f32; 2] = [0.6, 1.2];
+/// Thickest wall (m) an opened door goes through.
+const DOOR_WALL: f32 = 0.25;
+/// Nearest a closed door comes to the sensor (m).
+const DOOR_CLEARANCE: f32 = 0.4;
+
+/// An editable copy of an occupancy bit grid (row-major bits, 32 a word).
+struct Cells {
+    w: u32,
+    h: u32,
+    words: Vec<u32>,
+}
+
+impl Cells {
+    fn of(grid: &BitGrid<'_>) -> Cells {
+        Cells {
+            w: refloc::raycast::Occupancy::width(grid),
+            h: refloc::raycast::Occupancy::height(grid),
+            words: grid.words().to_vec(),
+        }
+    }
+
+    /// The cell under world point `p`, if inside the grid.
+    fn cell(&self, frame: &MapFrame, p: [f32; 2]) -> Option<(u32, u32)> {
+        let c = frame.to_cells(p);
+        let (x, y) = (c[0].floor(), c[1].floor());
+        (x >= 0.0 && y >= 0.0 && x < self.w as f32 && y < self.h as f32)
+            .then_some((x as u32, y as u32))
+    }
+
+    fn blocked(&self, x: u32, y: u32) -> bool {
+        let bit = y as usize * self.w as usize + x as usize;
+        self.words
+            .get(bit / 32)
+            .is_some_and(|word| word & (1 << (bit % 32)) != 0)
+    }
+
+    /// Whether world point `p` is an obstacle (outside the grid: yes).
+    fn blocked_at(&self, frame: &MapFrame, p: [f32; 2]) -> bool {
+        self.cell(frame, p).is_none_or(|(x, y)| self.blocked(x, y))
+    }
+
+    /// Sets (`on`) or clears cell (x, y) (outside the grid: nothing).
+    fn set(&mut self, x: u32, y: u32, on: bool) {
+        if x >= self.w || y >= self.h {
+            return;
+        }
+        let bit = y as usize * self.w as usize + x as usize;
+        if let Some(word) = self.words.get_mut(bit / 32) {
+            if on {
+                *word |= 1 << (bit % 32);
+            } else {
+                *word &= !(1 << (bit % 32));
+            }
+        }
+    }
+
+    /// Sets (`on`) or clears the cell under world point `p`.
+    fn set_at(&mut self, frame: &MapFrame, p: [f32; 2], on: bool) {
+        if let Some((x, y)) = self.cell(frame, p) {
+            self.set(x, y, on);
+        }
+    }
+
+    /// `scan` of this world (of `grid` itself if the copy is unusable).
+    fn cast(&self, grid: &BitGrid<'_>, scan: impl Fn(&BitGrid<'_>) -> Vec<f32>) -> Vec<f32> {
+        match BitGrid::new(self.w, self.h, &self.words) {
+            Some(g) => scan(&g),
+            None => scan(grid),
+        }
+    }
+}
+
+/// Closes the doorway through free point `p` along direction `across`
+/// (rad) when the free gap there is doorway-wide and clear of the sensor
+/// at `sensor`: a wall from one side to the other. True when it did.
+fn close_door(
+    world: &mut Cells,
+    grid: &BitGrid<'_>,
+    frame: &MapFrame,
+    sensor: [f32; 2],
+    p: [f32; 2],
+    across: f32,
+) -> bool {
+    let reach = DOOR_GAP[1] + 0.1;
+    let t1 = beam(grid, frame, p, across, reach);
+    let t2 = beam(grid, frame, p, across + std::f32::consts::PI, reach);
+    let gap = t1 + t2;
+    if !(DOOR_GAP[0]..=DOOR_GAP[1]).contains(&gap) {
+        return false;
+    }
+    let u = [across.cos(), across.sin()];
+    let a = [p[0] - t2 * u[0], p[1] - t2 * u[1]];
+    // Keep the sensor off the new wall: its distance to the segment a..a+gap u.
+    let s = ((sensor[0] - a[0]) * u[0] + (sensor[1] - a[1]) * u[1]).clamp(0.0, gap);
+    let q = [a[0] + s * u[0], a[1] + s * u[1]];
+    if ((sensor[0] - q[0]).powi(2) + (sensor[1] - q[1]).powi(2)).sqrt() < DOOR_CLEARANCE {
+        return false;
+    }
+    let step = 0.5 * frame.resolution;
+    let n = (gap / step).ceil() as usize;
+    for i in 0..=n {
+        let t = (i as f32 * step).min(gap);
+        world.set_at(frame, [a[0] + t * u[0], a[1] + t * u[1]], true);
+    }
+    true
+}
+
+/// Opens a door in the wall at obstacle point `p` when, along direction
+/// `across` (rad), the wall is at most [`DOOR_WALL`] thick with free space
+/// on both sides: clears a 0.8-1.0 m stretch of it. True when it did.
+fn open_door(
+    world: &mut Cells,
+    grid: &BitGrid<'_>,
+    frame: &MapFrame,
+    p: [f32; 2],
+    across: f32,
+    rng: &mut Rng,
+) -> bool {
+    let u = [across.cos(), across.sin()];
+    let step = 0.5 * frame.resolution;
+    // Obstacle extent along +u and -u from p in the map, stepping until
+    // free (None: thicker than a wall a door goes through, or the edge).
+    let extent = |sign: f32| -> Option<f32> {
+        let mut t = 0.0;
+        while t <= DOOR_WALL {
+            t += step;
+            let (x, y) = world.cell(frame, [p[0] + sign * t * u[0], p[1] + sign * t * u[1]])?;
+            if !refloc::raycast::Occupancy::blocked(grid, x, y) {
+                return Some(t);
+            }
+        }
+        None
+    };
+    let (Some(fwd), Some(back)) = (extent(1.0), extent(-1.0)) else {
+        return false;
+    };
+    if fwd + back > DOOR_WALL {
+        return false;
+    }
+    let v = [-u[1], u[0]];
+    let half = 0.5 * rng.range(0.8, 1.0) as f32;
+    let n_along = (2.0 * half / step).ceil() as i32;
+    let n_across = ((fwd + back) / step).ceil() as i32 + 2;
+    for i in 0..=n_along {
+        let s = -half + i as f32 * step;
+        for j in 0..=n_across {
+            let t = -back - step + j as f32 * step;
+            let q = [p[0] + s * v[0] + t * u[0], p[1] + s * v[1] + t * u[1]];
+            world.set_at(frame, q, false);
+        }
+    }
+    true
+}
+
 /// Distance along the unit ray `origin + t dir` to a disc, if it hits.
 fn ray_disc(origin: [f32; 2], dir: [f32; 2], centre: [f32; 2], radius: f32) -> Option<f32> {
     let o = [origin[0] - centre[0], origin[1] - centre[1]];
@@ -330,27 +504,80 @@ mod tests {
         for c in Class::ALL {
             assert_eq!(Class::parse(c.name()), Some(c));
         }
-        assert_eq!(Class::parse("doors"), None);
+        assert_eq!(Class::parse("windows"), None);
     }
 
-    #[test]
-    fn disturbances_change_the_scan_and_are_reproducible() {
-        // A 10 m x 10 m room (0.1 m cells, walls one cell thick).
+    /// A 10 m x 10 m room (0.1 m cells, walls one cell thick) split at
+    /// x = 7 m by a wall with a 1 m doorway at y = 4-5 m.
+    fn two_rooms() -> (u32, u32, Vec<u32>) {
         let (w, h) = (100u32, 100u32);
         let mut words = vec![0u32; BitGrid::words_for(w, h)];
         for y in 0..h {
             for x in 0..w {
-                if x == 0 || y == 0 || x == w - 1 || y == h - 1 {
+                let outer = x == 0 || y == 0 || x == w - 1 || y == h - 1;
+                let inner = x == 70 && !(40..50).contains(&y);
+                if outer || inner {
                     let bit = (y * w + x) as usize;
                     words[bit / 32] |= 1 << (bit % 32);
                 }
             }
         }
+        (w, h, words)
+    }
+
+    const FRAME: MapFrame = MapFrame {
+        resolution: 0.1,
+        origin: Pose2 {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+        },
+    };
+
+    #[test]
+    fn doors_open_walls_and_close_doorways() {
+        let (w, h, words) = two_rooms();
         let grid = BitGrid::new(w, h, &words).unwrap();
-        let frame = MapFrame {
-            resolution: 0.1,
-            origin: Pose2::new(0.0, 0.0, 0.0),
-        };
+        let lidar = Lidar::new(720, std::f32::consts::TAU, 30.0);
+        let sensor = Pose2::new(5.0, 4.5, 0.0);
+        let clean = crate::sim::virtual_scan(&grid, &FRAME, &sensor, &lidar);
+        let (mut longer, mut shorter) = (0, 0);
+        for seed in 0..40 {
+            let a = scan(
+                Class::DoorsToggled,
+                &grid,
+                &FRAME,
+                &sensor,
+                &lidar,
+                &mut Rng::new(seed),
+            );
+            // A closed door never comes nearer the sensor than
+            // DOOR_CLEARANCE (less a cell of rasterization).
+            assert!(a.iter().all(|r| *r >= DOOR_CLEARANCE - 0.1), "seed {seed}");
+            // Beams towards the inner wall (|angle| < 60 degrees from +x).
+            for (k, (x, y)) in a.iter().zip(&clean).enumerate() {
+                let ang = lidar.angle(k);
+                if ang.cos() < 0.5 {
+                    continue;
+                }
+                if *x > *y + 0.5 {
+                    longer += 1; // through an opened door
+                } else if *x < *y - 0.5 {
+                    shorter += 1; // stopped by a closed door
+                }
+            }
+        }
+        assert!(
+            longer > 0 && shorter > 0,
+            "longer {longer} shorter {shorter}"
+        );
+    }
+
+    #[test]
+    fn disturbances_change_the_scan_and_are_reproducible() {
+        let (w, h, words) = two_rooms();
+        let grid = BitGrid::new(w, h, &words).unwrap();
+        let frame = FRAME;
         let lidar = Lidar::new(360, std::f32::consts::TAU, 30.0);
         let sensor = Pose2::new(5.0, 5.0, 0.3);
         let clean = crate::sim::virtual_scan(&grid, &frame, &sensor, &lidar);
