@@ -4,6 +4,8 @@
 #
 #   scripts/python-test.sh
 #
+# The bag tests write ROS 2 bags at test time with the independent `mcap`
+# and `mcap-ros2-support` libraries (tests/make_bags.py).
 # The venv lives in python/target/venv (git-ignored). The tests compile the
 # shipped office map and localize scans that `mapc eval --dump` simulates,
 # with the debug mapc binary (built by `cargo test`, or here when missing).
@@ -22,7 +24,8 @@ say "virtual environment $VENV"
 rm -rf "$VENV"
 python3 -m venv "$VENV" || { echo "error: python3 -m venv failed" >&2; exit 2; }
 "$VENV/bin/pip" install --quiet --upgrade pip
-"$VENV/bin/pip" install --quiet "maturin>=1.5,<2" "numpy>=2" "pytest>=7"
+"$VENV/bin/pip" install --quiet "maturin>=1.5,<2" "numpy>=2" "pytest>=7" \
+    "mcap>=1.2,<2" "mcap-ros2-support>=0.5,<1"
 say "pip install ./python (maturin builds the extension)"
 "$VENV/bin/pip" install --quiet "$ROOT/python"
 say "pytest"

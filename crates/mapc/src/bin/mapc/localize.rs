@@ -79,18 +79,30 @@ fn is_stream(input: &str) -> bool {
     input == "-" || std::fs::metadata(input).map_or(true, |m| !m.is_file())
 }
 
+/// A bag scan's header stamp (ns since the epoch) and frame in its JSON result.
+fn add_stamp(o: &mut serde_json::Value, scan: &scanio::InputScan) {
+    if let Some(st) = &scan.stamp {
+        o["stamp_ns"] = json!(st.ns);
+        o["log_time_ns"] = json!(st.log_time_ns);
+        o["frame_id"] = json!(st.frame_id);
+    }
+}
+
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The database.
     pub db: PathBuf,
-    /// Scans: JSON Lines (sensor_msgs/LaserScan fields) or a CARMEN log (.gz ok); "-" reads stdin.
+    /// Scans: JSON Lines (sensor_msgs/LaserScan fields), a CARMEN log (.gz ok; "-" reads stdin), or a ROS 2 bag (rosbag2 MCAP, .mcap).
     pub input: String,
     /// Output: json (one object per line) or text (a table).
     #[arg(long, default_value = "json")]
     pub format: String,
-    /// Input format: auto, jsonl or carmen.
+    /// Input format: auto (an MCAP file by its magic, else by the first line), jsonl, carmen or mcap.
     #[arg(long, default_value = "auto")]
     pub input_format: String,
+    /// The sensor_msgs/msg/LaserScan topic of a bag; needed only when the bag has several.
+    #[arg(long, value_name = "TOPIC")]
+    pub topic: Option<String>,
     /// Field of view of CARMEN FLASER/RLASER lines (degrees) [default: 180].
     #[arg(long, value_name = "DEG")]
     pub fov: Option<f32>,
@@ -117,10 +129,26 @@ pub struct Args {
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
     let db = open_db(&a.db, Check::Full)?;
-    let fmt: InputFormat = a
-        .input_format
-        .parse()
-        .map_err(|e| input_err(anyhow::anyhow!("--input-format: {e}")))?;
+    let want_bag = match a.input_format.to_ascii_lowercase().as_str() {
+        "mcap" | "bag" | "rosbag2" => true,
+        "auto" => a.input != "-" && scanio::bag::is_mcap(std::path::Path::new(&a.input)),
+        _ => false,
+    };
+    let fmt: InputFormat = if want_bag {
+        InputFormat::Auto
+    } else {
+        a.input_format.parse().map_err(|e| {
+            input_err(anyhow::anyhow!(
+                "--input-format: {e} (or mcap for a ROS 2 bag)"
+            ))
+        })?
+    };
+    if a.topic.is_some() && !want_bag {
+        return Err(input_err(anyhow::anyhow!(
+            "--topic applies to ROS 2 bags (MCAP) only; {} is not one",
+            a.input
+        )));
+    }
     let text = match a.format.as_str() {
         "json" => false,
         "text" => true,
@@ -158,8 +186,28 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             .collect(),
         None => HashMap::new(),
     };
-    let reader =
-        scanio::open_input(&a.input).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.input)))?;
+    let scans: Box<dyn Iterator<Item = Result<scanio::InputScan, scanio::ScanError>>> = if want_bag
+    {
+        let bag = scanio::bag::open_bag(std::path::Path::new(&a.input), a.topic.as_deref())
+            .map_err(input_err)?;
+        ui.note(&format!(
+            "{}: topic {}{}",
+            a.input,
+            bag.topic,
+            bag.damage
+                .as_ref()
+                .map(|d| format!(" (damaged: {d})"))
+                .unwrap_or_default()
+        ));
+        Box::new(
+            bag.scans(&opts)
+                .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.input)))?,
+        )
+    } else {
+        let reader = scanio::open_input(&a.input)
+            .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.input)))?;
+        Box::new(scanio::read_scans(reader, fmt, &opts))
+    };
     let stdout = std::io::stdout();
     let mut out = Sink::new(stdout.lock(), is_stream(&a.input));
     let mut scratch: Vec<u8> = Vec::new();
@@ -176,7 +224,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             "id", "ok", "x_m", "y_m", "theta", "site", "E", "M", "M_thr", "conf", "time_ms"
         ))?;
     }
-    for (k, item) in scanio::read_scans(reader, fmt, &opts).enumerate() {
+    for (k, item) in scans.enumerate() {
         if out.closed {
             break;
         }
@@ -330,6 +378,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                             .map(|h| json!({"x": h.pose.x, "y": h.pose.y, "theta": h.pose.theta, "confidence": h.confidence}))
                             .collect::<Vec<_>>(),
                     });
+                    add_stamp(&mut o, &scan);
                     if a.no_candidates {
                         o["candidates"] = json!(l.candidates.len());
                     } else {
@@ -360,8 +409,9 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                 let line = if text {
                     format!("{:<12} {:>4} not localized: {e}", scan.id, "no")
                 } else {
-                    json!({"id": scan.id, "accepted": false, "reason": e.to_string(), "time_us": time_us})
-                        .to_string()
+                    let mut o = json!({"id": scan.id, "accepted": false, "reason": e.to_string(), "time_us": time_us});
+                    add_stamp(&mut o, &scan);
+                    o.to_string()
                 };
                 out.line(&line)?;
             }
