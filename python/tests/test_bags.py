@@ -110,3 +110,78 @@ def test_truncated_bag_localizes_what_is_there_then_fails(work):
     assert 0 < len(good) < N
     for a, b in zip(good, full):
         assert (a["id"], a["x"], a["y"], a["stamp_ns"]) == (b["id"], b["x"], b["y"], b["stamp_ns"])
+
+
+def yaw(q):
+    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+
+
+def decoded(path):
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    with open(path, "rb") as f:
+        r = make_reader(f, decoder_factories=[DecoderFactory()])
+        summary = r.get_summary()
+        msgs = {}
+        for schema, ch, m, d in r.iter_decoded_messages():
+            msgs.setdefault(ch.topic, []).append((m.log_time, d))
+    return summary, msgs
+
+
+def test_mcap_recording_reads_back_in_the_python_reader(work):
+    d, _ = work
+    out = d / "out.mcap"
+    p = localize(d, d / "multi.mcap", "--topic", "/scan", "--no-candidates", "--mcap", out)
+    assert p.returncode == 0, p.stderr
+    rs = results(p)
+    summary, msgs = decoded(out)
+    types = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+    assert types == {
+        "/map": "nav_msgs/msg/OccupancyGrid",
+        "/scan": "sensor_msgs/msg/LaserScan",
+        "/tf": "tf2_msgs/msg/TFMessage",
+        "/refloc/pose": "geometry_msgs/msg/PoseWithCovarianceStamped",
+        "/refloc/hypotheses": "geometry_msgs/msg/PoseArray",
+    }
+    assert all(s.encoding == "ros2msg" for s in summary.schemas.values())
+    assert all(c.message_encoding == "cdr" for c in summary.channels.values())
+    stamps = [make_bags.stamp(k)[0] for k in range(N)]
+
+    [(t, grid)] = msgs["/map"]
+    assert t == stamps[0] and grid.header.frame_id == "map"
+    assert abs(grid.info.resolution - 0.05) < 1e-7  # office-demo.yaml
+    assert len(grid.data) == grid.info.width * grid.info.height > 0
+    occ = sum(1 for v in grid.data if v == 100)
+    assert 0 < occ < len(grid.data) and all(v in (0, 100) for v in grid.data)
+
+    _, bag_in = decoded(d / "multi.mcap")
+    assert [t for t, _ in msgs["/scan"]] == stamps
+    for (_, a), (_, b) in zip(msgs["/scan"], bag_in["/scan"]):
+        assert a.header.frame_id == "scan_link"
+        assert (a.header.stamp.sec, a.header.stamp.nanosec) == (b.header.stamp.sec, b.header.stamp.nanosec)
+        assert list(a.ranges) == list(b.ranges)
+        assert (a.angle_min, a.angle_increment) == (b.angle_min, b.angle_increment)
+
+    acc = [(s, r) for s, r in zip(stamps, rs) if r["accepted"]]
+    poses = msgs["/refloc/pose"]
+    assert [t for t, _ in poses] == [s for s, _ in acc]
+    for (_, m), (_, r) in zip(poses, acc):
+        assert m.header.frame_id == "map"
+        pp = m.pose.pose
+        assert abs(pp.position.x - r["x"]) < 1e-5 and abs(pp.position.y - r["y"]) < 1e-5
+        assert abs(wrap(yaw(pp.orientation) - r["theta"])) < 1e-5
+        c3, c6 = r["covariance"], list(m.pose.covariance)
+        for i, a in enumerate((0, 1, 5)):
+            for j, b in enumerate((0, 1, 5)):
+                assert abs(c6[a * 6 + b] - c3[i * 3 + j]) < 1e-9
+        assert sum(1 for v in c6 if v != 0) <= 9
+    tfs = msgs["/tf"]
+    assert len(tfs) == len(acc)
+    for (_, m), (_, r) in zip(tfs, acc):
+        [tr] = m.transforms
+        assert (tr.header.frame_id, tr.child_frame_id) == ("map", "scan_link")
+    hyps = msgs["/refloc/hypotheses"]
+    assert len(hyps) == N
+    for (_, m), r in zip(hyps, rs):
+        assert len(m.poses) == len(r["hypotheses"]) >= 1
+        assert abs(m.poses[0].position.x - r["hypotheses"][0]["x"]) < 1e-5

@@ -115,6 +115,9 @@ pub struct Args {
     /// (`truth_refined` in the JSON; see docs/results.md).
     #[arg(long, value_name = "FILE")]
     pub truth: Option<PathBuf>,
+    /// Also write a Foxglove-readable recording (MCAP, ROS 2 messages): /map, /scan, /tf (map -> laser), /refloc/pose, /refloc/hypotheses. Scans without a stamp (JSON Lines, CARMEN) are placed 100 ms apart from time 0.
+    #[arg(long, value_name = "OUT.mcap")]
+    pub mcap: Option<PathBuf>,
     /// Leave the candidate list out of the JSON output.
     #[arg(long)]
     pub no_candidates: bool,
@@ -208,6 +211,15 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.input)))?;
         Box::new(scanio::read_scans(reader, fmt, &opts))
     };
+    let mut rec = match &a.mcap {
+        Some(p) => Some(
+            mapc::recording::Recording::create(p)
+                .map_err(|e| fail_err(anyhow::anyhow!("--mcap {}: {e}", p.display())))?,
+        ),
+        None => None,
+    };
+    let mut map_written = false;
+    let rec_err = |e: anyhow::Error| fail_err(anyhow::anyhow!("--mcap: {e}"));
     let stdout = std::io::stdout();
     let mut out = Sink::new(stdout.lock(), is_stream(&a.input));
     let mut scratch: Vec<u8> = Vec::new();
@@ -272,6 +284,51 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         let t0 = Instant::now();
         let r = refloc::localize_with_prior(&db, &input, &mut scratch, prior);
         let time_us = t0.elapsed().as_micros() as u64;
+        let at_ns = scan.stamp.as_ref().map_or(k as i64 * 100_000_000, |s| s.ns);
+        let frame_id = scan
+            .stamp
+            .as_ref()
+            .map(|s| s.frame_id.as_str())
+            .filter(|f| !f.is_empty())
+            .unwrap_or("laser");
+        let at = mapc::recording::Stamp {
+            ns: at_ns,
+            frame: frame_id,
+        };
+        if let Some(rec) = rec.as_mut() {
+            if !map_written {
+                // At the first readable scan's time.
+                rec.map(at_ns, &db.frame(), &db.grid()).map_err(rec_err)?;
+                map_written = true;
+            }
+            if let ScanData::Ranges {
+                angle_min,
+                angle_increment,
+                range_min,
+                range_max,
+                ranges,
+            } = &scan.data
+            {
+                rec.scan(
+                    &at,
+                    *angle_min,
+                    *angle_increment,
+                    *range_min,
+                    *range_max,
+                    ranges,
+                )
+                .map_err(rec_err)?;
+            }
+            if let Ok(l) = &r {
+                let hyps: Vec<refloc::Pose2> = l.hypotheses().iter().map(|h| h.pose).collect();
+                rec.hypotheses(at_ns, &hyps).map_err(rec_err)?;
+                if l.accepted {
+                    rec.pose(at_ns, &l.pose, l.covariance).map_err(rec_err)?;
+                    rec.tf(&at, &l.pose.compose(&db.params().sensor.offset))
+                        .map_err(rec_err)?;
+                }
+            }
+        }
         times.push(time_us as f64);
         // The truth index is the scan's position among the laser lines.
         let scan_index = scan
@@ -418,6 +475,9 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         }
     }
     out.finish()?;
+    if let Some(rec) = rec {
+        rec.finish().map_err(rec_err)?;
+    }
     if out.closed {
         ui.note(&format!(
             "output closed by its reader after {n} scans; stopped there"
