@@ -88,6 +88,28 @@ fn add_stamp(o: &mut serde_json::Value, scan: &scanio::InputScan) {
     }
 }
 
+/// Every input and output format, for `mapc localize --help`.
+pub const FORMATS: &str = "\
+Input formats (--input-format auto decides: an MCAP file by its magic, else by the first line):
+  jsonl   JSON Lines, one sensor_msgs/LaserScan-like object per line: angle_min,
+          angle_increment, range_min, range_max, ranges (null = no return), optional
+          angle_max, id, truth [x, y, theta]; or points [[x, y], ...] instead of ranges.
+          Plain or gzip (.gz); '-' reads stdin (results then flushed one by one).
+  carmen  CARMEN logs: FLASER, RLASER, ROBOTLASERk lines (--fov for FLASER/RLASER).
+  mcap    ROS 2 bags in rosbag2's MCAP storage: sensor_msgs/msg/LaserScan (CDR) of one
+          topic (--topic when the bag has several); chunks uncompressed or zstd.
+Outputs:
+  stdout  --format json: one object per scan (pose, accepted, confidence, covariance,
+          hypotheses, candidates, timing; stamp_ns, log_time_ns, frame_id for bag scans;
+          errors as {\"id\", \"line\", \"error\"}). --format text: a table.
+  --mcap  a Foxglove-readable MCAP recording of ROS 2 messages: /map (nav_msgs/OccupancyGrid),
+          /scan (sensor_msgs/LaserScan), /tf (tf2_msgs/TFMessage map -> laser frame),
+          /refloc/pose (geometry_msgs/PoseWithCovarianceStamped), /refloc/hypotheses
+          (geometry_msgs/PoseArray).
+  stderr  a summary (scans, unreadable, accepted, median time; against --truth if given).
+Exit: 0 all scans read, 1 some scan unreadable (or a bag cut off) or a write failed, 2 bad input.
+See docs/robot.md.";
+
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The database.
