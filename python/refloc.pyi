@@ -64,7 +64,9 @@ class RefDb:
     def scratch_size(self, beams: int) -> int:
         """Bytes of scratch memory a scan of `beams` beams needs."""
     def localize(self, ranges: _Ranges, angle_min: float, angle_increment: float,
-                 range_min: float = 0.0, range_max: float = 30.0) -> Localization:
+                 range_min: float = 0.0, range_max: float = 30.0,
+                 region: Optional[Tuple[float, float, float]] = None,
+                 heading: Optional[Tuple[float, float]] = None) -> Localization:
         """Localizes one scan (see Localizer.localize); allocates its scratch per call."""
     def simulate_scan(self, x: float, y: float, theta: float, beams: int = 360,
                       fov: float = 6.283185307179586, range_max: float = 30.0
@@ -75,12 +77,17 @@ class Localizer:
     """Localizes scans against one database, reusing its own scratch memory."""
     def __init__(self, db: RefDb, max_beams: int = 2048) -> None: ...
     def localize(self, ranges: _Ranges, angle_min: float, angle_increment: float,
-                 range_min: float = 0.0, range_max: float = 30.0) -> Localization:
+                 range_min: float = 0.0, range_max: float = 30.0,
+                 region: Optional[Tuple[float, float, float]] = None,
+                 heading: Optional[Tuple[float, float]] = None) -> Localization:
         """Localizes one scan: ranges (m; inf or nan for no return) of beams at
         angle_min + k * angle_increment (rad, sensor frame, counter-clockwise),
         as in sensor_msgs/LaserScan. A contiguous float32 array is read in place;
         anything else is converted. The GIL is released while localizing.
-        Raises LocalizeError when the scan cannot be localized."""
+        Priors: region=(x, y, radius) (m, map frame) and heading=(theta,
+        tolerance) (rad, map frame); sites and poses outside them are not
+        considered. Raises LocalizeError when the scan cannot be localized,
+        ValueError for a prior that makes no sense."""
 
 def build(map_yaml: Union[str, PathLike[str]], out_path: Union[str, PathLike[str]],
           beams: int = 362, range_max: float = 30.0, seed: int = 1,

@@ -86,7 +86,8 @@ impl RefDb {
 
     /// Localizes one scan with no initial pose (see `Localizer.localize`);
     /// allocates the scratch memory for this call.
-    #[pyo3(signature = (ranges, angle_min, angle_increment, range_min=0.0, range_max=30.0))]
+    #[pyo3(signature = (ranges, angle_min, angle_increment, range_min=0.0, range_max=30.0, region=None, heading=None))]
+    #[allow(clippy::too_many_arguments)] // Python keyword arguments
     fn localize(
         slf: Bound<'_, Self>,
         ranges: PyArrayLike1<'_, f32, AllowTypeChange>,
@@ -94,11 +95,21 @@ impl RefDb {
         angle_increment: f32,
         range_min: f32,
         range_max: f32,
+        region: Option<(f32, f32, f32)>,
+        heading: Option<(f32, f32)>,
     ) -> PyResult<Localization> {
         let beams = ranges.len()?;
         // At least one beam of scratch: an empty scan is the runtime's error to report.
         let mut loc = Localizer::new(slf, beams.max(1))?;
-        loc.localize(ranges, angle_min, angle_increment, range_min, range_max)
+        loc.localize(
+            ranges,
+            angle_min,
+            angle_increment,
+            range_min,
+            range_max,
+            region,
+            heading,
+        )
     }
 
     /// A virtual scan of the map (ranges in m, inf = no return) of a sensor
@@ -181,7 +192,13 @@ impl Localizer {
     /// counter-clockwise), as in `sensor_msgs/LaserScan`. A float32
     /// contiguous array is read in place; anything else is converted. The
     /// GIL is released while localizing.
-    #[pyo3(signature = (ranges, angle_min, angle_increment, range_min=0.0, range_max=30.0))]
+    ///
+    /// Priors: `region=(x, y, radius)` (m, map frame): the robot is within
+    /// radius of (x, y); `heading=(theta, tolerance)` (rad, map frame): it
+    /// faces theta +- tolerance. Sites and poses outside them are not
+    /// considered; without them nothing changes.
+    #[pyo3(signature = (ranges, angle_min, angle_increment, range_min=0.0, range_max=30.0, region=None, heading=None))]
+    #[allow(clippy::too_many_arguments)] // Python keyword arguments
     fn localize(
         &mut self,
         ranges: PyArrayLike1<'_, f32, AllowTypeChange>,
@@ -189,7 +206,10 @@ impl Localizer {
         angle_increment: f32,
         range_min: f32,
         range_max: f32,
+        region: Option<(f32, f32, f32)>,
+        heading: Option<(f32, f32)>,
     ) -> PyResult<Localization> {
+        let prior = make_prior(region, heading)?;
         let py = ranges.py();
         let db = self.db.bind(py).get();
         let view = ranges.as_slice()?;
@@ -202,10 +222,32 @@ impl Localizer {
                 range_max,
                 ranges: view,
             });
-            refloc::localize(&db.db, &scan, scratch)
+            refloc::localize_with_prior(&db.db, &scan, scratch, prior)
                 .map(|l| Localization::of(&l))
                 .map_err(|e| LocalizeError::new_err(e.to_string()))
         })
+    }
+}
+
+/// The runtime's prior of `region=(x, y, radius)` and `heading=(theta,
+/// tolerance)`; `None` when neither is given.
+fn make_prior(
+    region: Option<(f32, f32, f32)>,
+    heading: Option<(f32, f32)>,
+) -> PyResult<Option<refloc::Prior>> {
+    let mut prior = region.map(|(x, y, r)| refloc::Prior::circle(x, y, r));
+    if let Some((theta, tol)) = heading {
+        prior = Some(
+            prior
+                .unwrap_or(refloc::Prior::NONE)
+                .with_heading(theta, tol),
+        );
+    }
+    match prior {
+        Some(p) if !p.is_valid() => Err(PyValueError::new_err(format!(
+            "region needs finite x, y and radius > 0 m, heading a finite theta and tolerance >= 0 rad; got region={region:?}, heading={heading:?}"
+        ))),
+        p => Ok(p),
     }
 }
 

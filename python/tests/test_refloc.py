@@ -115,3 +115,31 @@ def test_quickstart_example_runs():
     out = subprocess.run([os.sys.executable, str(ROOT / "python" / "examples" / "quickstart.py")],
                          check=True, capture_output=True, text=True).stdout
     assert "reference sites" in out and "Localization(" in out
+
+
+def test_priors_narrow_the_search(db_path):
+    db = refloc.RefDb(db_path)
+    loc = refloc.Localizer(db, max_beams=1024)
+    x, y = db.site_position(5)
+    th = 0.4
+    ranges, amin, inc = db.simulate_scan(x, y, th, beams=360)
+    free = loc.localize(ranges, amin, inc)
+    near = loc.localize(ranges, amin, inc, region=(x + 1.0, y, 5.0), heading=(th, math.radians(30)))
+    assert free.accepted and near.accepted and math.hypot(near.x - x, near.y - y) < 0.3
+    assert abs(near.x - free.x) < 1e-3 and abs(near.y - free.y) < 1e-3
+    # A heading window or a region that excludes the true pose: whatever is
+    # answered lies inside it (or nothing is).
+    try:
+        r = loc.localize(ranges, amin, inc, heading=(th + math.pi, math.radians(20)))
+        assert abs(wrap(r.theta - th - math.pi)) <= math.radians(20) + 1e-3 or not r.accepted
+    except refloc.LocalizeError:
+        pass
+    try:
+        r = loc.localize(ranges, amin, inc, region=(x + 30.0, y + 30.0, 1.0))
+        assert math.hypot(r.x - x - 30.0, r.y - y - 30.0) <= 1.0 + 1e-3 or not r.accepted
+    except refloc.LocalizeError:
+        pass
+    with pytest.raises(ValueError):
+        loc.localize(ranges, amin, inc, region=(x, y, -1.0))
+    with pytest.raises(ValueError):
+        db.localize(ranges, amin, inc, heading=(math.nan, 0.1))

@@ -16,6 +16,7 @@ pub mod index;
 pub mod mapfile;
 pub mod pipeline;
 pub mod plot;
+pub mod recording;
 pub mod render;
 pub mod rng;
 pub mod scanio;

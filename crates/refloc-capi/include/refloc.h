@@ -108,6 +108,11 @@ enum refloc_status
      */
     REFLOC_ERR_NO_MATCH = 24,
     /*
+     The prior makes no sense (non-finite centre or heading, radius not
+     positive, negative tolerance).
+     */
+    REFLOC_ERR_BAD_PRIOR = 25,
+    /*
      An error this version of the C ABI does not know.
      */
     REFLOC_ERR_UNKNOWN = 99,
@@ -299,6 +304,36 @@ typedef struct refloc_result {
     struct refloc_hypothesis hypotheses[5];
 } refloc_result;
 
+/*
+ What the caller already knows about the robot pose, for
+ [`refloc_localize_ranges_prior`]: within `radius` m of (`x`, `y`) (map
+ frame; `INFINITY` for anywhere), facing `heading` +- `heading_tolerance`
+ rad (a tolerance of pi or more for any heading). Sites and poses outside
+ it are not considered.
+ */
+typedef struct refloc_prior {
+    /*
+     Region centre x (m, map frame).
+     */
+    float x;
+    /*
+     Region centre y (m, map frame).
+     */
+    float y;
+    /*
+     Region radius (m); `INFINITY` for no region.
+     */
+    float radius;
+    /*
+     Heading window centre (rad, map frame).
+     */
+    float heading;
+    /*
+     Heading window half width (rad); pi or more for any heading.
+     */
+    float heading_tolerance;
+} refloc_prior;
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
@@ -384,6 +419,27 @@ refloc_status refloc_localize_ranges(const struct refloc_db *db,
                                      uint8_t *scratch,
                                      size_t scratch_len,
                                      struct refloc_result *out_result);
+
+/*
+ As [`refloc_localize_ranges`], with a prior (`prior` NULL: none, the
+ same as [`refloc_localize_ranges`]). A prior that makes no sense is
+ `REFLOC_ERR_BAD_PRIOR`.
+
+ # Safety
+ As [`refloc_localize_ranges`]; `prior` is NULL or points to a readable
+ `refloc_prior`.
+ */
+refloc_status refloc_localize_ranges_prior(const struct refloc_db *db,
+                                           float angle_min,
+                                           float angle_increment,
+                                           float range_min,
+                                           float range_max,
+                                           const float *ranges,
+                                           size_t n,
+                                           const struct refloc_prior *prior,
+                                           uint8_t *scratch,
+                                           size_t scratch_len,
+                                           struct refloc_result *out_result);
 
 /*
  Localizes one scan given as `n` points in the sensor frame (`points` =

@@ -41,7 +41,8 @@ use core::ffi::c_char;
 use core::mem::{align_of, size_of};
 
 use refloc::{
-    localize, scratch_size, DbErrorKind, Localization, LocalizeError, RangeScan, RefDb, Scan,
+    localize_with_prior, scratch_size, DbErrorKind, Localization, LocalizeError, Prior, RangeScan,
+    RefDb, Scan,
 };
 
 /// Bytes of a [`refloc_db`] handle (an ABI constant: it changes only with
@@ -102,6 +103,9 @@ pub enum refloc_status {
     REFLOC_ERR_NOT_ENOUGH_POINTS = 23,
     /// No candidate site produced a pose.
     REFLOC_ERR_NO_MATCH = 24,
+    /// The prior makes no sense (non-finite centre or heading, radius not
+    /// positive, negative tolerance).
+    REFLOC_ERR_BAD_PRIOR = 25,
     /// An error this version of the C ABI does not know.
     REFLOC_ERR_UNKNOWN = 99,
 }
@@ -132,6 +136,26 @@ pub struct refloc_db_info {
     pub range_max: f32,
     /// Size of the `.refdb` (bytes).
     pub file_bytes: u64,
+}
+
+/// What the caller already knows about the robot pose, for
+/// [`refloc_localize_ranges_prior`]: within `radius` m of (`x`, `y`) (map
+/// frame; `INFINITY` for anywhere), facing `heading` +- `heading_tolerance`
+/// rad (a tolerance of pi or more for any heading). Sites and poses outside
+/// it are not considered.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct refloc_prior {
+    /// Region centre x (m, map frame).
+    pub x: f32,
+    /// Region centre y (m, map frame).
+    pub y: f32,
+    /// Region radius (m); `INFINITY` for no region.
+    pub radius: f32,
+    /// Heading window centre (rad, map frame).
+    pub heading: f32,
+    /// Heading window half width (rad); pi or more for any heading.
+    pub heading_tolerance: f32,
 }
 
 /// The answer for one scan, filled by the `refloc_localize_*` functions
@@ -439,6 +463,7 @@ fn fill(out: &mut refloc_result, fix: &Localization<'_>) {
 unsafe fn run(
     db: *const refloc_db,
     scan: impl FnOnce() -> Result<Scan<'static>, refloc_status>,
+    prior: Option<Prior>,
     scratch: *mut u8,
     scratch_len: usize,
     out_result: *mut refloc_result,
@@ -467,7 +492,10 @@ unsafe fn run(
     // SAFETY: `scratch_len` writable bytes that nothing else uses during
     // the call (caller's contract); u8 needs no alignment.
     let scratch = unsafe { core::slice::from_raw_parts_mut(scratch, scratch_len) };
-    match localize(&h.db, &scan, scratch) {
+    if prior.is_some_and(|p| !p.is_valid()) {
+        return REFLOC_ERR_BAD_PRIOR;
+    }
+    match localize_with_prior(&h.db, &scan, scratch, prior) {
         Ok(fix) => {
             fill(out, &fix);
             REFLOC_OK
@@ -521,6 +549,61 @@ pub unsafe extern "C" fn refloc_localize_ranges(
     scratch_len: usize,
     out_result: *mut refloc_result,
 ) -> refloc_status {
+    // SAFETY: the caller's contract; no prior.
+    unsafe {
+        refloc_localize_ranges_prior(
+            db,
+            angle_min,
+            angle_increment,
+            range_min,
+            range_max,
+            ranges,
+            n,
+            core::ptr::null(),
+            scratch,
+            scratch_len,
+            out_result,
+        )
+    }
+}
+
+/// As [`refloc_localize_ranges`], with a prior (`prior` NULL: none, the
+/// same as [`refloc_localize_ranges`]). A prior that makes no sense is
+/// `REFLOC_ERR_BAD_PRIOR`.
+///
+/// # Safety
+/// As [`refloc_localize_ranges`]; `prior` is NULL or points to a readable
+/// `refloc_prior`.
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn refloc_localize_ranges_prior(
+    db: *const refloc_db,
+    angle_min: f32,
+    angle_increment: f32,
+    range_min: f32,
+    range_max: f32,
+    ranges: *const f32,
+    n: usize,
+    prior: *const refloc_prior,
+    scratch: *mut u8,
+    scratch_len: usize,
+    out_result: *mut refloc_result,
+) -> refloc_status {
+    let prior = if prior.is_null() {
+        None
+    } else if (prior as usize) % align_of::<refloc_prior>() != 0 {
+        return REFLOC_ERR_ALIGNMENT;
+    } else {
+        // SAFETY: non-null, aligned, readable (caller's contract).
+        let p = unsafe { *prior };
+        Some(Prior {
+            x: p.x,
+            y: p.y,
+            radius: p.radius,
+            heading: p.heading,
+            heading_tolerance: p.heading_tolerance,
+        })
+    };
     let scan = || {
         // SAFETY: the caller's contract; the slice lives through the call.
         let ranges = unsafe { floats(ranges, n) }?;
@@ -533,7 +616,7 @@ pub unsafe extern "C" fn refloc_localize_ranges(
         }))
     };
     // SAFETY: the caller's contract.
-    unsafe { run(db, scan, scratch, scratch_len, out_result) }
+    unsafe { run(db, scan, prior, scratch, scratch_len, out_result) }
 }
 
 /// Localizes one scan given as `n` points in the sensor frame (`points` =
@@ -569,7 +652,7 @@ pub unsafe extern "C" fn refloc_localize_points(
         Ok(Scan::Points { points, range_max })
     };
     // SAFETY: the caller's contract.
-    unsafe { run(db, scan, scratch, scratch_len, out_result) }
+    unsafe { run(db, scan, None, scratch, scratch_len, out_result) }
 }
 
 /// A static, NUL-terminated English description of a status code (never
@@ -593,6 +676,7 @@ pub extern "C" fn refloc_strerror(status: i32) -> *const c_char {
         22 => c"unusable scan geometry (angles or range limits)",
         23 => c"too few valid returns in the scan",
         24 => c"no candidate site matched the scan",
+        25 => c"unusable prior (finite x, y, heading; radius > 0 or INFINITY; tolerance >= 0)",
         99 => c"an error this version of the C ABI does not know",
         _ => c"unknown refloc status",
     };
@@ -632,6 +716,7 @@ mod tests {
             REFLOC_ERR_BAD_SCAN,
             REFLOC_ERR_NOT_ENOUGH_POINTS,
             REFLOC_ERR_NO_MATCH,
+            REFLOC_ERR_BAD_PRIOR,
             REFLOC_ERR_UNKNOWN,
         ] {
             // SAFETY: refloc_strerror returns a static C string.

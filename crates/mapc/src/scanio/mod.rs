@@ -34,6 +34,8 @@ use std::str::FromStr;
 use flate2::read::MultiGzDecoder;
 use serde::de::{self, DeserializeSeed, Deserializer, IgnoredAny, MapAccess, SeqAccess, Visitor};
 
+pub mod bag;
+pub mod cdr;
 #[cfg(test)]
 mod tests;
 
@@ -53,6 +55,9 @@ pub struct InputScan {
     /// carries one: JSON `truth`, or the laser pose fields of a CARMEN line
     /// (in the log's own frame, not the map's).
     pub truth: Option<[f64; 3]>,
+    /// The header stamp and frame of a scan read from a ROS 2 bag
+    /// ([`bag`]); `None` for the line formats.
+    pub stamp: Option<bag::Stamp>,
 }
 
 /// The measurements of one scan, in the sensor frame (x forward, y left,
@@ -789,6 +794,7 @@ fn parse_json_line(text: &[u8], line: usize, opts: &ReadOptions) -> Result<Input
             line,
             data,
             truth,
+            stamp: None,
         }),
         Err(message) => Err(ScanError { id, line, message }),
     }
@@ -1510,6 +1516,7 @@ impl CarmenState {
                 line,
                 data,
                 truth: Some(pose),
+                stamp: None,
             }),
             Err(message) => Err(ScanError {
                 id: Some(id),

@@ -231,6 +231,26 @@ int main(int argc, char **argv) {
     check_pose(&r, s.truth, "ranges");
     check(r.valid_points > 0 && r.candidates > 0 && r.reserved[0] == 0, "result fields");
 
+    /* With a prior around the truth (5 m, +-30 deg): the same pose; a bad prior is refused. */
+    refloc_prior prior = {(float)s.truth[0] + 1.0f, (float)s.truth[1], 5.0f, (float)s.truth[2],
+                          0.5236f};
+    refloc_result rpr;
+    check_status(refloc_localize_ranges_prior(&db, s.angle_min, s.angle_increment, s.range_min,
+                                              s.range_max, s.ranges, s.n, &prior, scratch, need,
+                                              &rpr),
+                 REFLOC_OK, "localize ranges with a prior");
+    check_pose(&rpr, s.truth, "ranges with a prior");
+    check_status(refloc_localize_ranges_prior(&db, s.angle_min, s.angle_increment, s.range_min,
+                                              s.range_max, s.ranges, s.n, NULL, scratch, need,
+                                              &rpr),
+                 REFLOC_OK, "NULL prior");
+    check(rpr.x == r.x && rpr.y == r.y && rpr.theta == r.theta, "NULL prior = no prior");
+    prior.radius = -1.0f;
+    check_status(refloc_localize_ranges_prior(&db, s.angle_min, s.angle_increment, s.range_min,
+                                              s.range_max, s.ranges, s.n, &prior, scratch, need,
+                                              &rpr),
+                 REFLOC_ERR_BAD_PRIOR, "negative prior radius");
+
     /* The same scan as points (x, y pairs; no return = NaN). */
     float *pts = own_malloc(2 * s.n * sizeof(float));
     if (!pts) return 2;

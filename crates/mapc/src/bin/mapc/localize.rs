@@ -79,18 +79,52 @@ fn is_stream(input: &str) -> bool {
     input == "-" || std::fs::metadata(input).map_or(true, |m| !m.is_file())
 }
 
+/// A bag scan's header stamp (ns since the epoch) and frame in its JSON result.
+fn add_stamp(o: &mut serde_json::Value, scan: &scanio::InputScan) {
+    if let Some(st) = &scan.stamp {
+        o["stamp_ns"] = json!(st.ns);
+        o["log_time_ns"] = json!(st.log_time_ns);
+        o["frame_id"] = json!(st.frame_id);
+    }
+}
+
+/// Every input and output format, for `mapc localize --help`.
+pub const FORMATS: &str = "\
+Input formats (--input-format auto decides: an MCAP file by its magic, else by the first line):
+  jsonl   JSON Lines, one sensor_msgs/LaserScan-like object per line: angle_min,
+          angle_increment, range_min, range_max, ranges (null = no return), optional
+          angle_max, id, truth [x, y, theta]; or points [[x, y], ...] instead of ranges.
+          Plain or gzip (.gz); '-' reads stdin (results then flushed one by one).
+  carmen  CARMEN logs: FLASER, RLASER, ROBOTLASERk lines (--fov for FLASER/RLASER).
+  mcap    ROS 2 bags in rosbag2's MCAP storage: sensor_msgs/msg/LaserScan (CDR) of one
+          topic (--topic when the bag has several); chunks uncompressed or zstd.
+Outputs:
+  stdout  --format json: one object per scan (pose, accepted, confidence, covariance,
+          hypotheses, candidates, timing; stamp_ns, log_time_ns, frame_id for bag scans;
+          errors as {\"id\", \"line\", \"error\"}). --format text: a table.
+  --mcap  a Foxglove-readable MCAP recording of ROS 2 messages: /map (nav_msgs/OccupancyGrid),
+          /scan (sensor_msgs/LaserScan), /tf (tf2_msgs/TFMessage map -> laser frame),
+          /refloc/pose (geometry_msgs/PoseWithCovarianceStamped), /refloc/hypotheses
+          (geometry_msgs/PoseArray).
+  stderr  a summary (scans, unreadable, accepted, median time; against --truth if given).
+Exit: 0 all scans read, 1 some scan unreadable (or a bag cut off) or a write failed, 2 bad input.
+See docs/robot.md.";
+
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The database.
     pub db: PathBuf,
-    /// Scans: JSON Lines (sensor_msgs/LaserScan fields) or a CARMEN log (.gz ok); "-" reads stdin.
+    /// Scans: JSON Lines (sensor_msgs/LaserScan fields), a CARMEN log (.gz ok; "-" reads stdin), or a ROS 2 bag (rosbag2 MCAP, .mcap).
     pub input: String,
     /// Output: json (one object per line) or text (a table).
     #[arg(long, default_value = "json")]
     pub format: String,
-    /// Input format: auto, jsonl or carmen.
+    /// Input format: auto (an MCAP file by its magic, else by the first line), jsonl, carmen or mcap.
     #[arg(long, default_value = "auto")]
     pub input_format: String,
+    /// The sensor_msgs/msg/LaserScan topic of a bag; needed only when the bag has several.
+    #[arg(long, value_name = "TOPIC")]
+    pub topic: Option<String>,
     /// Field of view of CARMEN FLASER/RLASER lines (degrees) [default: 180].
     #[arg(long, value_name = "DEG")]
     pub fov: Option<f32>,
@@ -103,6 +137,9 @@ pub struct Args {
     /// (`truth_refined` in the JSON; see docs/results.md).
     #[arg(long, value_name = "FILE")]
     pub truth: Option<PathBuf>,
+    /// Also write a Foxglove-readable recording (MCAP, ROS 2 messages): /map, /scan, /tf (map -> laser), /refloc/pose, /refloc/hypotheses. Scans without a stamp (JSON Lines, CARMEN) are placed 100 ms apart from time 0.
+    #[arg(long, value_name = "OUT.mcap")]
+    pub mcap: Option<PathBuf>,
     /// Leave the candidate list out of the JSON output.
     #[arg(long)]
     pub no_candidates: bool,
@@ -117,10 +154,26 @@ pub struct Args {
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
     let db = open_db(&a.db, Check::Full)?;
-    let fmt: InputFormat = a
-        .input_format
-        .parse()
-        .map_err(|e| input_err(anyhow::anyhow!("--input-format: {e}")))?;
+    let want_bag = match a.input_format.to_ascii_lowercase().as_str() {
+        "mcap" | "bag" | "rosbag2" => true,
+        "auto" => a.input != "-" && scanio::bag::is_mcap(std::path::Path::new(&a.input)),
+        _ => false,
+    };
+    let fmt: InputFormat = if want_bag {
+        InputFormat::Auto
+    } else {
+        a.input_format.parse().map_err(|e| {
+            input_err(anyhow::anyhow!(
+                "--input-format: {e} (or mcap for a ROS 2 bag)"
+            ))
+        })?
+    };
+    if a.topic.is_some() && !want_bag {
+        return Err(input_err(anyhow::anyhow!(
+            "--topic applies to ROS 2 bags (MCAP) only; {} is not one",
+            a.input
+        )));
+    }
     let text = match a.format.as_str() {
         "json" => false,
         "text" => true,
@@ -158,8 +211,37 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             .collect(),
         None => HashMap::new(),
     };
-    let reader =
-        scanio::open_input(&a.input).map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.input)))?;
+    let scans: Box<dyn Iterator<Item = Result<scanio::InputScan, scanio::ScanError>>> = if want_bag
+    {
+        let bag = scanio::bag::open_bag(std::path::Path::new(&a.input), a.topic.as_deref())
+            .map_err(input_err)?;
+        ui.note(&format!(
+            "{}: topic {}{}",
+            a.input,
+            bag.topic,
+            bag.damage
+                .as_ref()
+                .map(|d| format!(" (damaged: {d})"))
+                .unwrap_or_default()
+        ));
+        Box::new(
+            bag.scans(&opts)
+                .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.input)))?,
+        )
+    } else {
+        let reader = scanio::open_input(&a.input)
+            .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.input)))?;
+        Box::new(scanio::read_scans(reader, fmt, &opts))
+    };
+    let mut rec = match &a.mcap {
+        Some(p) => Some(
+            mapc::recording::Recording::create(p)
+                .map_err(|e| fail_err(anyhow::anyhow!("--mcap {}: {e}", p.display())))?,
+        ),
+        None => None,
+    };
+    let mut map_written = false;
+    let rec_err = |e: anyhow::Error| fail_err(anyhow::anyhow!("--mcap: {e}"));
     let stdout = std::io::stdout();
     let mut out = Sink::new(stdout.lock(), is_stream(&a.input));
     let mut scratch: Vec<u8> = Vec::new();
@@ -176,7 +258,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             "id", "ok", "x_m", "y_m", "theta", "site", "E", "M", "M_thr", "conf", "time_ms"
         ))?;
     }
-    for (k, item) in scanio::read_scans(reader, fmt, &opts).enumerate() {
+    for (k, item) in scans.enumerate() {
         if out.closed {
             break;
         }
@@ -224,6 +306,51 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         let t0 = Instant::now();
         let r = refloc::localize_with_prior(&db, &input, &mut scratch, prior);
         let time_us = t0.elapsed().as_micros() as u64;
+        let at_ns = scan.stamp.as_ref().map_or(k as i64 * 100_000_000, |s| s.ns);
+        let frame_id = scan
+            .stamp
+            .as_ref()
+            .map(|s| s.frame_id.as_str())
+            .filter(|f| !f.is_empty())
+            .unwrap_or("laser");
+        let at = mapc::recording::Stamp {
+            ns: at_ns,
+            frame: frame_id,
+        };
+        if let Some(rec) = rec.as_mut() {
+            if !map_written {
+                // At the first readable scan's time.
+                rec.map(at_ns, &db.frame(), &db.grid()).map_err(rec_err)?;
+                map_written = true;
+            }
+            if let ScanData::Ranges {
+                angle_min,
+                angle_increment,
+                range_min,
+                range_max,
+                ranges,
+            } = &scan.data
+            {
+                rec.scan(
+                    &at,
+                    *angle_min,
+                    *angle_increment,
+                    *range_min,
+                    *range_max,
+                    ranges,
+                )
+                .map_err(rec_err)?;
+            }
+            if let Ok(l) = &r {
+                let hyps: Vec<refloc::Pose2> = l.hypotheses().iter().map(|h| h.pose).collect();
+                rec.hypotheses(at_ns, &hyps).map_err(rec_err)?;
+                if l.accepted {
+                    rec.pose(at_ns, &l.pose, l.covariance).map_err(rec_err)?;
+                    rec.tf(&at, &l.pose.compose(&db.params().sensor.offset))
+                        .map_err(rec_err)?;
+                }
+            }
+        }
         times.push(time_us as f64);
         // The truth index is the scan's position among the laser lines.
         let scan_index = scan
@@ -330,6 +457,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                             .map(|h| json!({"x": h.pose.x, "y": h.pose.y, "theta": h.pose.theta, "confidence": h.confidence}))
                             .collect::<Vec<_>>(),
                     });
+                    add_stamp(&mut o, &scan);
                     if a.no_candidates {
                         o["candidates"] = json!(l.candidates.len());
                     } else {
@@ -360,14 +488,18 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                 let line = if text {
                     format!("{:<12} {:>4} not localized: {e}", scan.id, "no")
                 } else {
-                    json!({"id": scan.id, "accepted": false, "reason": e.to_string(), "time_us": time_us})
-                        .to_string()
+                    let mut o = json!({"id": scan.id, "accepted": false, "reason": e.to_string(), "time_us": time_us});
+                    add_stamp(&mut o, &scan);
+                    o.to_string()
                 };
                 out.line(&line)?;
             }
         }
     }
     out.finish()?;
+    if let Some(rec) = rec {
+        rec.finish().map_err(rec_err)?;
+    }
     if out.closed {
         ui.note(&format!(
             "output closed by its reader after {n} scans; stopped there"

@@ -47,7 +47,8 @@ enum Cmd {
     Verify(inspect::VerifyArgs),
     /// Compare two .refdb files (sites, parameters, inputs).
     Diff(inspect::DiffArgs),
-    /// Localize scans (JSON Lines or CARMEN log) against a .refdb.
+    /// Localize scans (JSON Lines, CARMEN log or ROS 2 bag) against a .refdb.
+    #[command(after_long_help = localize::FORMATS)]
     Localize(localize::Args),
     /// Evaluate localization on simulated scans (the paper's experiments).
     Eval(eval::Args),
