@@ -206,6 +206,112 @@ fn localize_a_batch_of_json_lines() {
 }
 
 #[test]
+fn localize_against_several_maps_says_which_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = built(dir.path(), &[]);
+    // A second building: a synthetic office (another layout).
+    let other_dir = dir.path().join("other");
+    std::fs::create_dir_all(&other_dir).unwrap();
+    let src = common::office_map(&other_dir, 240, 200, 7);
+    let other = dir.path().join("other.refdb");
+    let o = mapc(
+        &[
+            "build",
+            src.yaml_path.as_ref().unwrap().to_str().unwrap(),
+            "-o",
+            other.to_str().unwrap(),
+            "--fit-queries",
+            "40",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "build failed: {}", text(&o));
+    let (poses, lines) = common::jsonl_scans(&std::fs::read(&demo).unwrap(), 8, 5);
+    let input = dir.path().join("scans.jsonl");
+    std::fs::write(&input, lines).unwrap();
+    // The demo map second: the answer names it whatever the order.
+    let o = mapc(
+        &[
+            "localize",
+            other.to_str().unwrap(),
+            demo.to_str().unwrap(),
+            input.to_str().unwrap(),
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let out: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(out.len(), poses.len());
+    for (r, p) in out.iter().zip(&poses) {
+        assert_eq!(r["accepted"], true, "{r}");
+        assert_eq!(r["map_index"], 1, "{r}");
+        assert_eq!(r["map"], demo.display().to_string());
+        let (x, y) = (r["x"].as_f64().unwrap(), r["y"].as_f64().unwrap());
+        assert!(((x - p.x as f64).powi(2) + (y - p.y as f64).powi(2)).sqrt() < 0.1);
+        let maps = r["maps"].as_array().unwrap();
+        assert_eq!(maps.len(), 2);
+        assert_eq!(
+            maps[0]["accepted"], false,
+            "the other building accepted {r}"
+        );
+    }
+    assert!(text(&o).contains("none: 0"), "{}", text(&o));
+    // Options that belong to one map are refused with several.
+    let o = mapc(
+        &[
+            "localize",
+            other.to_str().unwrap(),
+            demo.to_str().unwrap(),
+            input.to_str().unwrap(),
+            "--prior",
+            "1,1,5",
+        ],
+        dir.path(),
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("belong to one map"), "{}", text(&o));
+    // With one map the prior is X,Y,R in one argument; a negative heading
+    // is a value, not an option.
+    let p0 = poses[0];
+    let region = format!("{},{},5", p0.x, p0.y);
+    let o = mapc(
+        &[
+            "localize",
+            demo.to_str().unwrap(),
+            input.to_str().unwrap(),
+            "--prior",
+            &region,
+            "--prior-heading",
+            "-180,180",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let first: serde_json::Value =
+        serde_json::from_str(String::from_utf8_lossy(&o.stdout).lines().next().unwrap()).unwrap();
+    assert_eq!(first["accepted"], true, "{first}");
+    let o = mapc(
+        &[
+            "localize",
+            demo.to_str().unwrap(),
+            input.to_str().unwrap(),
+            "--prior",
+            "1,2",
+        ],
+        dir.path(),
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(
+        text(&o).contains("takes 3 comma-separated numbers"),
+        "{}",
+        text(&o)
+    );
+}
+
+#[test]
 fn eval_check_passes_on_own_baseline_and_fails_on_a_worse_map() {
     let dir = tempfile::tempdir().unwrap();
     let good = built(dir.path(), &[]);

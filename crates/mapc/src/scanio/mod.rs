@@ -104,6 +104,28 @@ impl ScanData {
         self.len() == 0
     }
 
+    /// The runtime's view of the scan (borrowing its ranges or points).
+    pub fn as_scan(&self) -> refloc::Scan<'_> {
+        match self {
+            ScanData::Ranges {
+                angle_min,
+                angle_increment,
+                range_min,
+                range_max,
+                ranges,
+            } => refloc::Scan::Ranges(refloc::RangeScan {
+                angle_min: *angle_min,
+                angle_increment: *angle_increment,
+                range_min: *range_min,
+                range_max: *range_max,
+                ranges,
+            }),
+            ScanData::Points { points, range_max } => refloc::Scan::Points {
+                points,
+                range_max: *range_max,
+            },
+        }
+    }
     /// The beams as (bearing in the sensor frame (rad), range (m)) pairs:
     /// a range outside `[range_min, range_max]` or non-finite (no return)
     /// becomes infinite; points give their bearing and distance.

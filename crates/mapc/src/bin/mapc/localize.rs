@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use mapc::scanio::{self, InputFormat, ReadOptions, ScanData};
-use refloc::{scratch_size, RangeScan, Scan};
+use refloc::scratch_size;
 use serde_json::json;
 
 use crate::util::{fail_err, input_err, open_db, Check, CliError, CliResult, Ui};
@@ -112,8 +112,9 @@ See docs/robot.md.";
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The database.
-    pub db: PathBuf,
+    /// The database; several (floors, buildings) to ask which map each scan is on.
+    #[arg(required = true, num_args = 1.., value_name = "DB")]
+    pub db: Vec<PathBuf>,
     /// Scans: JSON Lines (sensor_msgs/LaserScan fields), a CARMEN log (.gz ok; "-" reads stdin), or a ROS 2 bag (rosbag2 MCAP, .mcap).
     pub input: String,
     /// Output: json (one object per line) or text (a table).
@@ -145,15 +146,29 @@ pub struct Args {
     pub no_candidates: bool,
     /// Prior region: the robot is within R m of (X, Y) (map frame); sites
     /// outside it (plus 2 m) are not ranked, poses outside it are no answer.
-    #[arg(long, value_name = "X,Y,R", value_delimiter = ',', num_args = 3)]
+    #[arg(
+        long,
+        value_name = "X,Y,R",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
     pub prior: Option<Vec<f32>>,
     /// Prior heading window: the robot faces THETA +- TOL degrees (map frame).
-    #[arg(long, value_name = "THETA,TOL", value_delimiter = ',', num_args = 2)]
+    #[arg(
+        long,
+        value_name = "THETA,TOL",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
     pub prior_heading: Option<Vec<f32>>,
 }
 
-pub fn run(a: Args, ui: &Ui) -> CliResult {
-    let db = open_db(&a.db, Check::Full)?;
+/// The scans of a stream of results.
+type Scans = Box<dyn Iterator<Item = Result<scanio::InputScan, scanio::ScanError>>>;
+
+/// Opens the input the options name: a ROS 2 bag (by `--input-format` or
+/// its magic), else JSON Lines or a CARMEN log (a file or stdin).
+fn scan_source(a: &Args, ui: &Ui) -> Result<Scans, CliError> {
     let want_bag = match a.input_format.to_ascii_lowercase().as_str() {
         "mcap" | "bag" | "rosbag2" => true,
         "auto" => a.input != "-" && scanio::bag::is_mcap(std::path::Path::new(&a.input)),
@@ -174,45 +189,12 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             a.input
         )));
     }
-    let text = match a.format.as_str() {
-        "json" => false,
-        "text" => true,
-        other => {
-            return Err(input_err(anyhow::anyhow!(
-                "--format must be json or text, not '{other}'"
-            )))
-        }
-    };
     let opts = ReadOptions {
         fov: a.fov.map(|d| d.to_radians()),
         range_max: a.range_max,
         ..ReadOptions::default()
     };
-    let mut prior = a
-        .prior
-        .as_ref()
-        .map(|v| refloc::Prior::circle(v[0], v[1], v[2]));
-    if let Some(h) = &a.prior_heading {
-        prior = Some(
-            prior
-                .unwrap_or(refloc::Prior::NONE)
-                .with_heading(h[0].to_radians(), h[1].to_radians()),
-        );
-    }
-    if prior.is_some_and(|p| !p.is_valid()) {
-        return Err(input_err(anyhow::anyhow!(
-            "--prior X,Y,R needs finite X, Y and R > 0 m; --prior-heading THETA,TOL a finite THETA and TOL >= 0 degrees"
-        )));
-    }
-    let truth: HashMap<usize, [f64; 3]> = match &a.truth {
-        Some(p) => scanio::read_poses_in_map(p)
-            .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", p.display())))?
-            .into_iter()
-            .collect(),
-        None => HashMap::new(),
-    };
-    let scans: Box<dyn Iterator<Item = Result<scanio::InputScan, scanio::ScanError>>> = if want_bag
-    {
+    Ok(if want_bag {
         let bag = scanio::bag::open_bag(std::path::Path::new(&a.input), a.topic.as_deref())
             .map_err(input_err)?;
         ui.note(&format!(
@@ -232,7 +214,190 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         let reader = scanio::open_input(&a.input)
             .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", a.input)))?;
         Box::new(scanio::read_scans(reader, fmt, &opts))
+    })
+}
+
+/// `--format`: text (true) or JSON (false).
+fn output_is_text(a: &Args) -> Result<bool, CliError> {
+    match a.format.as_str() {
+        "json" => Ok(false),
+        "text" => Ok(true),
+        other => Err(input_err(anyhow::anyhow!(
+            "--format must be json or text, not '{other}'"
+        ))),
+    }
+}
+
+/// The prior `--prior` and `--prior-heading` give, checked.
+fn prior_of(a: &Args) -> Result<Option<refloc::Prior>, CliError> {
+    for (opt, v, n) in [
+        ("--prior X,Y,R", &a.prior, 3),
+        ("--prior-heading THETA,TOL", &a.prior_heading, 2),
+    ] {
+        if let Some(v) = v.as_ref().filter(|v| v.len() != n) {
+            return Err(input_err(anyhow::anyhow!(
+                "{opt} takes {n} comma-separated numbers, not {}",
+                v.len()
+            )));
+        }
+    }
+    let mut prior = a
+        .prior
+        .as_ref()
+        .map(|v| refloc::Prior::circle(v[0], v[1], v[2]));
+    if let Some(h) = &a.prior_heading {
+        prior = Some(
+            prior
+                .unwrap_or(refloc::Prior::NONE)
+                .with_heading(h[0].to_radians(), h[1].to_radians()),
+        );
+    }
+    if prior.is_some_and(|p| !p.is_valid()) {
+        return Err(input_err(anyhow::anyhow!(
+            "--prior X,Y,R needs finite X, Y and R > 0 m; --prior-heading THETA,TOL a finite THETA and TOL >= 0 degrees"
+        )));
+    }
+    Ok(prior)
+}
+
+/// `mapc localize A.refdb B.refdb ... SCANS`: each scan against every
+/// database; the answer is the accepted localization with the highest
+/// confidence (its map, pose and confidence), or no map when none accepts.
+fn run_maps(a: &Args, ui: &Ui) -> CliResult {
+    if a.truth.is_some() || a.mcap.is_some() || a.prior.is_some() || a.prior_heading.is_some() {
+        return Err(input_err(anyhow::anyhow!(
+            "--truth, --mcap, --prior and --prior-heading belong to one map; give one database with them, not {}",
+            a.db.len()
+        )));
+    }
+    let dbs =
+        a.db.iter()
+            .map(|p| open_db(p, Check::Full))
+            .collect::<Result<Vec<_>, _>>()?;
+    let names: Vec<String> = a.db.iter().map(|p| p.display().to_string()).collect();
+    let text = output_is_text(a)?;
+    let scans = scan_source(a, ui)?;
+    let stdout = std::io::stdout();
+    let mut out = Sink::new(stdout.lock(), is_stream(&a.input));
+    let mut scratch: Vec<Vec<u8>> = vec![Vec::new(); dbs.len()];
+    let (mut n, mut failed, mut none) = (0usize, 0usize, 0usize);
+    let mut chosen = vec![0usize; dbs.len()];
+    if text {
+        out.line(&format!(
+            "{:<12} {:<24} {:>4} {:>9} {:>9} {:>8} {:>6} {:>8}",
+            "id", "map", "ok", "x_m", "y_m", "theta", "conf", "time_ms"
+        ))?;
+    }
+    for item in scans {
+        if out.closed {
+            break;
+        }
+        n += 1;
+        let scan = match item {
+            Ok(s) => s,
+            Err(e) => {
+                failed += 1;
+                out.line(&json!({"id": e.id, "line": e.line, "error": e.message}).to_string())?;
+                continue;
+            }
+        };
+        let input = scan.data.as_scan();
+        let t0 = Instant::now();
+        // (map, accepted, confidence, pose) of every database that answered.
+        let mut per_map = Vec::with_capacity(dbs.len());
+        for (i, db) in dbs.iter().enumerate() {
+            let need = scratch_size(db.params(), scan.data.len());
+            if scratch[i].len() < need {
+                scratch[i].resize(need, 0);
+            }
+            match refloc::localize(db, &input, &mut scratch[i]) {
+                Ok(l) => per_map.push((i, l.accepted, l.confidence, l.pose, None)),
+                Err(e) => {
+                    per_map.push((i, false, 0.0, refloc::Pose2::default(), Some(e.to_string())))
+                }
+            }
+        }
+        let time_us = t0.elapsed().as_micros() as u64;
+        let best = per_map
+            .iter()
+            .filter(|m| m.1)
+            .max_by(|x, y| x.2.total_cmp(&y.2).then(y.0.cmp(&x.0)));
+        match best {
+            Some(b) => chosen[b.0] += 1,
+            None => none += 1,
+        }
+        if text {
+            let (map, ok, pose, conf) = match best {
+                Some(b) => (names[b.0].as_str(), "yes", b.3, b.2),
+                None => ("-", "no", refloc::Pose2::default(), 0.0),
+            };
+            out.line(&format!(
+                "{:<12} {:<24} {:>4} {:>9.3} {:>9.3} {:>8.4} {:>6.3} {:>8.2}",
+                scan.id,
+                map,
+                ok,
+                pose.x,
+                pose.y,
+                pose.theta,
+                conf,
+                time_us as f64 / 1000.0
+            ))?;
+        } else {
+            let mut o = json!({
+                "id": scan.id,
+                "accepted": best.is_some(),
+                "map": best.map(|b| names[b.0].clone()),
+                "map_index": best.map(|b| b.0),
+                "x": best.map(|b| b.3.x), "y": best.map(|b| b.3.y), "theta": best.map(|b| b.3.theta),
+                "confidence": best.map_or(0.0, |b| b.2),
+                "time_us": time_us,
+                "maps": per_map.iter().map(|m| {
+                    let mut e = json!({"map": names[m.0], "accepted": m.1, "confidence": m.2,
+                        "x": m.3.x, "y": m.3.y, "theta": m.3.theta});
+                    if let Some(r) = &m.4 {
+                        e["reason"] = json!(r);
+                    }
+                    e
+                }).collect::<Vec<_>>(),
+            });
+            add_stamp(&mut o, &scan);
+            out.line(&o.to_string())?;
+        }
+    }
+    out.finish()?;
+    if !ui.quiet {
+        let per: Vec<String> = names
+            .iter()
+            .zip(&chosen)
+            .map(|(m, c)| format!("{m}: {c}"))
+            .collect();
+        eprintln!(
+            "{n} scans, {failed} unreadable; on which map: {}, none: {none}",
+            per.join(", ")
+        );
+    }
+    Ok(if failed > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+pub fn run(a: Args, ui: &Ui) -> CliResult {
+    if a.db.len() > 1 {
+        return run_maps(&a, ui);
+    }
+    let db = open_db(&a.db[0], Check::Full)?;
+    let text = output_is_text(&a)?;
+    let prior = prior_of(&a)?;
+    let truth: HashMap<usize, [f64; 3]> = match &a.truth {
+        Some(p) => scanio::read_poses_in_map(p)
+            .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", p.display())))?
+            .into_iter()
+            .collect(),
+        None => HashMap::new(),
     };
+    let scans = scan_source(&a, ui)?;
     let mut rec = match &a.mcap {
         Some(p) => Some(
             mapc::recording::Recording::create(p)
@@ -284,25 +449,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         if scratch.len() < need {
             scratch.resize(need, 0);
         }
-        let input = match &scan.data {
-            ScanData::Ranges {
-                angle_min,
-                angle_increment,
-                range_min,
-                range_max,
-                ranges,
-            } => Scan::Ranges(RangeScan {
-                angle_min: *angle_min,
-                angle_increment: *angle_increment,
-                range_min: *range_min,
-                range_max: *range_max,
-                ranges,
-            }),
-            ScanData::Points { points, range_max } => Scan::Points {
-                points,
-                range_max: *range_max,
-            },
-        };
+        let input = scan.data.as_scan();
         let t0 = Instant::now();
         let r = refloc::localize_with_prior(&db, &input, &mut scratch, prior);
         let time_us = t0.elapsed().as_micros() as u64;
