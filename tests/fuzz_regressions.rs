@@ -250,6 +250,12 @@ fn refdb_unused_window_layout_keeps_scratch_size_sane() {
 /// Fixed in `mapc::mapfile`: the lower bound on the file size uses the bits
 /// per pixel the IHDR declares (colour type x bit depth: 64 here, so at
 /// least 4.1 MB), and the pixel buffer is allocated fallibly by the loader.
+/// The largest map-size limit (`--max-cells 2147483648`): the file-size
+/// bounds are tested behind it.
+const WIDEST: mapc::mapfile::MapLimits = mapc::mapfile::MapLimits {
+    max_cells: mapc::mapfile::MAX_CELLS,
+};
+
 #[test]
 fn mapfile_png_header_cannot_reserve_gigabytes() {
     let path = finding("mapfile", "png-rgba16-header-4gib-alloc");
@@ -265,7 +271,9 @@ fn mapfile_png_header_cannot_reserve_gigabytes() {
     let image = dir.path().join("map.png");
     std::fs::write(&image, &data[at + sep.len()..]).unwrap();
     LARGEST.with(|c| c.set(0));
-    let e = mapc::mapfile::load_image(&image, Some(0.05), None).unwrap_err();
+    // Beyond the default --max-cells (refused from the header): loaded
+    // with the largest limit, so the file-size bound behind it is tested.
+    let e = mapc::mapfile::load_image_within(&image, Some(0.05), None, &WIDEST).unwrap_err();
     assert!(
         matches!(e, mapc::mapfile::MapError::ImageDecode { .. })
             && e.to_string()
@@ -314,8 +322,9 @@ fn mapfile_png_allocation_is_bounded_by_the_file_size() {
             f.resize(len as usize, 0);
             std::fs::write(&image, &f).unwrap();
             LARGEST.with(|c| c.set(0));
-            let r =
-                std::panic::catch_unwind(|| mapc::mapfile::load_image(&image, Some(0.05), None));
+            let r = std::panic::catch_unwind(|| {
+                mapc::mapfile::load_image_within(&image, Some(0.05), None, &WIDEST)
+            });
             let largest = LARGEST.with(Cell::get);
             let what = format!("colour {colour} depth {depth}, {side} x {side} in {len} bytes");
             let e = r

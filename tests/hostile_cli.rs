@@ -228,12 +228,10 @@ fn a_build_that_would_not_read_back_keeps_the_old_database() {
         before,
         "old database changed"
     );
-    let mut names: Vec<String> = std::fs::read_dir(dir.path())
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    assert_eq!(names, ["bad.yaml", "good.refdb", "office-demo.pgm"]);
+    assert_eq!(
+        names_in(dir.path()),
+        ["bad.yaml", "good.refdb", "office-demo.pgm"]
+    );
 }
 
 #[test]
@@ -430,4 +428,274 @@ fn render_synth_and_eval_refuse_outputs_that_are_inputs_or_special_files() {
         std::fs::read(dir.path().join("ev/report.json")).unwrap(),
         b"{}"
     );
+}
+
+/// Address-space limit of the resource-bounded cases: far below what the
+/// unbounded versions reached (4.3 GB to 22 GB), far above what a refusal
+/// needs.
+const LIMIT_AS: u64 = 1 << 30;
+/// CPU-time limit (seconds) of the resource-bounded cases: exceeding it
+/// kills the process with SIGXCPU/SIGKILL, which fails the exit-code
+/// assertion. Not a wall-clock bound: a loaded machine does not trip it.
+const LIMIT_CPU: u64 = 60;
+
+/// `mapc` under `setrlimit` RLIMIT_AS (`LIMIT_AS`) and RLIMIT_CPU
+/// (`LIMIT_CPU`), set in the child between fork and exec. A case that
+/// allocated without bound would die (allocation failure aborts, or
+/// SIGKILL at the CPU hard limit) instead of exiting 2.
+#[cfg(unix)]
+fn bounded_mapc() -> Command {
+    use std::os::unix::process::CommandExt;
+    let mut c = mapc();
+    // SAFETY: only setrlimit (async-signal-safe) runs in the child.
+    unsafe {
+        c.pre_exec(|| {
+            for (res, v) in [(libc::RLIMIT_AS, LIMIT_AS), (libc::RLIMIT_CPU, LIMIT_CPU)] {
+                let lim = libc::rlimit {
+                    rlim_cur: v as libc::rlim_t,
+                    rlim_max: v as libc::rlim_t,
+                };
+                if libc::setrlimit(res, &lim) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+            }
+            Ok(())
+        });
+    }
+    c
+}
+
+/// Copies the demo map's image (400 x 300, no YAML beside it) into `dir`
+/// as `room.pgm`.
+fn copy_room(dir: &Path) {
+    let maps = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../maps/office-demo");
+    std::fs::copy(maps.join("office-demo.pgm"), dir.join("room.pgm")).unwrap();
+}
+
+/// Runs `cmd` as `build room.pgm --resolution 0.05 -o <out> --fit-queries 0
+/// -q <extra>` in `dir`.
+fn build_room(mut cmd: Command, dir: &Path, out: &str, extra: &[&str]) -> Output {
+    cmd.current_dir(dir)
+        .args(["build", "room.pgm", "--resolution", "0.05", "-o", out])
+        .args(["--fit-queries", "0", "-q"])
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+/// The names in `dir`, sorted.
+fn names_in(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// A directory holding a copy of the fixture database as `good.refdb`:
+/// (directory, its bytes).
+fn dir_with_good_db() -> (tempfile::TempDir, Vec<u8>) {
+    let (db, _) = fixture();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(db, dir.path().join("good.refdb")).unwrap();
+    let before = std::fs::read(dir.path().join("good.refdb")).unwrap();
+    (dir, before)
+}
+
+/// Runs `mapc build <image> -o good.refdb --resolution 0.05 <extra>` in
+/// `dir` under the resource limits; asserts exit 2, a message naming
+/// `--max-cells` and containing `says`, and `good.refdb` unchanged.
+#[cfg(unix)]
+fn assert_image_refused(dir: &Path, before: &[u8], image: &str, extra: &[&str], says: &str) {
+    let o = bounded_mapc()
+        .current_dir(dir)
+        .args(["build", image, "-o", "good.refdb", "--resolution", "0.05"])
+        .args(extra)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{image}: {}", text(&o));
+    assert!(text(&o).contains("--max-cells"), "{}", text(&o));
+    assert!(text(&o).contains(says), "{}", text(&o));
+    assert_eq!(std::fs::read(dir.join("good.refdb")).unwrap(), before);
+}
+
+#[cfg(unix)]
+#[test]
+fn image_size_bombs_are_refused_from_the_header_under_a_memory_limit() {
+    let (dir, before) = dir_with_good_db();
+    // A 40000 x 40000 PGM header (1.6e9 cells, within MAX_CELLS, above the
+    // default --max-cells) followed by a few bytes.
+    let mut pgm = b"P5\n40000 40000\n255\n".to_vec();
+    pgm.extend_from_slice(&[255; 64]);
+    std::fs::write(dir.path().join("bomb.pgm"), &pgm).unwrap();
+    assert_image_refused(
+        dir.path(),
+        &before,
+        "bomb.pgm",
+        &[],
+        "image is 40000 x 40000 pixels (1600000000 cells); the limit is 268435456 cells",
+    );
+    // The same PNG-sized claim: a real 8-bit grey PNG header (IHDR) of
+    // 46000 x 46000 with a tiny IDAT.
+    std::fs::write(dir.path().join("bomb.png"), png_header_only(46000, 46000)).unwrap();
+    assert_image_refused(
+        dir.path(),
+        &before,
+        "bomb.png",
+        &[],
+        "image is 46000 x 46000 pixels",
+    );
+    // A small map with a lower limit: the demo map is 400 x 300 (see
+    // maps/office-demo).
+    copy_room(dir.path());
+    assert_image_refused(
+        dir.path(),
+        &before,
+        "room.pgm",
+        &["--max-cells", "1000"],
+        "the limit is 1000 cells, 4000 decoded bytes",
+    );
+    // Few cells but 8 decoded bytes each (16-bit RGBA PAM): the decoded
+    // size is refused before the pixels are read.
+    let mut pam =
+        b"P7\nWIDTH 30\nHEIGHT 30\nDEPTH 4\nMAXVAL 65535\nTUPLTYPE RGB_ALPHA\nENDHDR\n".to_vec();
+    pam.extend(std::iter::repeat_n(0xffu8, 30 * 30 * 8));
+    std::fs::write(dir.path().join("wide.pam"), &pam).unwrap();
+    assert_image_refused(
+        dir.path(),
+        &before,
+        "wide.pam",
+        &["--max-cells", "1000"],
+        "(900 cells, 7200 bytes decoded); the limit is 1000 cells, 4000 decoded bytes",
+    );
+    // Out-of-range limits are usage errors.
+    for bad in ["0", "2147483649"] {
+        let o = mapc()
+            .current_dir(dir.path())
+            .args([
+                "build",
+                "room.pgm",
+                "--resolution",
+                "0.05",
+                "--max-cells",
+                bad,
+            ])
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+        assert!(text(&o).contains("--max-cells"), "{}", text(&o));
+    }
+    assert_eq!(
+        names_in(dir.path()),
+        ["bomb.pgm", "bomb.png", "good.refdb", "room.pgm", "wide.pam"]
+    );
+}
+
+/// A PNG of `w` x `h` 8-bit grey pixels whose IDAT holds one empty stored
+/// deflate block: the header is valid, the data far too short.
+fn png_header_only(w: u32, h: u32) -> Vec<u8> {
+    use mapc::testdata::png::chunk;
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = Vec::new();
+    ihdr.extend_from_slice(&w.to_be_bytes());
+    ihdr.extend_from_slice(&h.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 0, 0, 0, 0]);
+    chunk(&mut png, b"IHDR", &ihdr);
+    chunk(
+        &mut png,
+        b"IDAT",
+        &[0x78, 0x01, 0x01, 0x00, 0x00, 0xff, 0xff, 0, 0, 0, 1],
+    );
+    chunk(&mut png, b"IEND", &[]);
+    png
+}
+
+#[cfg(unix)]
+#[test]
+fn unbounded_cases_stay_bounded_under_memory_and_cpu_limits() {
+    let (dir, before) = dir_with_good_db();
+    copy_room(dir.path());
+    // Sites per GVD edge are capped by the edge's cells: a spacing of
+    // 1e-12 m (4.3 GB and an abort before) builds within the limits.
+    let o = build_room(
+        bounded_mapc(),
+        dir.path(),
+        "tiny.refdb",
+        &["--site-spacing", "1e-12"],
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let o = mapc()
+        .args(["verify", dir.path().join("tiny.refdb").to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    // An endless --check baseline (22 GB in 60 s before) is refused by size.
+    if Path::new("/dev/zero").exists() {
+        let out = tempfile::tempdir().unwrap();
+        let o = bounded_mapc()
+            .current_dir(dir.path())
+            .args(["eval", "good.refdb", "--check", "/dev/zero", "--no-figures"])
+            .args(["--out", out.path().to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+        assert!(text(&o).contains("larger than 64 MiB"), "{}", text(&o));
+        assert!(!out.path().join("report.json").exists());
+    }
+    assert_eq!(
+        std::fs::read(dir.path().join("good.refdb")).unwrap(),
+        before
+    );
+    assert_eq!(
+        names_in(dir.path()),
+        ["good.refdb", "room.pgm", "tiny.refdb"]
+    );
+}
+
+#[cfg(unix)]
+#[test]
+fn a_build_removes_stale_temporary_files_of_its_output_and_nothing_else() {
+    use std::os::unix::io::AsRawFd;
+    let (dir, _) = dir_with_good_db();
+    copy_room(dir.path());
+    let hour_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
+    let make = |name: &str, old: bool| {
+        let f = std::fs::File::create(dir.path().join(name)).unwrap();
+        f.set_len(1000).unwrap();
+        if old {
+            f.set_modified(hour_ago).unwrap();
+        }
+        f
+    };
+    // What a build killed mid-write leaves: its pattern, old, unlocked.
+    drop(make(".good.refdb.Ab3xZ9.tmp", true));
+    // A live writer's file: old but locked (flock) by this process.
+    let live = make(".good.refdb.Live01.tmp", true);
+    // SAFETY: flock on an open descriptor.
+    assert_eq!(
+        unsafe { libc::flock(live.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) },
+        0
+    );
+    // Just created (another writer may not have locked it yet).
+    drop(make(".good.refdb.Fresh1.tmp", false));
+    // Other names: another output's, a wrong length, a user's file.
+    drop(make(".other.refdb.Ab3xZ9.tmp", true));
+    drop(make(".good.refdb.toolong7.tmp", true));
+    drop(make("good.refdb.Ab3xZ9.tmp", true));
+    let o = build_room(mapc(), dir.path(), "good.refdb", &[]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert_eq!(
+        names_in(dir.path()),
+        [
+            ".good.refdb.Fresh1.tmp",
+            ".good.refdb.Live01.tmp",
+            ".good.refdb.toolong7.tmp",
+            ".other.refdb.Ab3xZ9.tmp",
+            "good.refdb",
+            "good.refdb.Ab3xZ9.tmp",
+            "room.pgm",
+        ]
+    );
+    drop(live);
 }

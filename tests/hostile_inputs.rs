@@ -759,7 +759,15 @@ fn sixteen_bit_pgm_maps_load_and_build_like_8_bit_ones() {
         assert!(m16.grid.cells == m8.grid.cells, "{what}: cells differ");
         assert_eq!(build_degenerate(&what, &m16), Ok(sites), "{what}");
     }
+    // 40000^2 16-bit: over the default --max-cells, refused from the
+    // header; under the largest limit, refused as truncated.
     let e = load("huge.pgm", b"P5\n40000 40000\n65535\n\x00\x00".to_vec()).unwrap_err();
+    assert!(matches!(e, MapError::ImageTooLarge { .. }), "{e}");
+    let widest = mapfile::MapLimits {
+        max_cells: mapfile::MAX_CELLS,
+    };
+    let e = mapfile::load_image_within(&dir.path().join("huge.pgm"), Some(0.05), None, &widest)
+        .unwrap_err();
     assert!(matches!(e, MapError::ImageDecode { .. }), "{e}");
     assert!(e.to_string().contains("truncated"), "{e}");
 }

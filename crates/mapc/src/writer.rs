@@ -1,7 +1,9 @@
 //! Writing a `.refdb` safely: the file is streamed into a temporary file in
 //! the target directory, flushed and synced, and only then renamed over the
-//! final name. A crash, a full disk or a write error leaves any existing
-//! database under that name untouched and no half-written file behind.
+//! final name. A full disk or a write error leaves any existing database
+//! under that name untouched and no half-written file behind. A killed
+//! process cannot remove its temporary file (`.<name>.XXXXXX.tmp`); the
+//! next write to the same name removes such stale files ([`remove_stale`]).
 
 use std::io::{self, Write};
 use std::path::Path;
@@ -51,9 +53,101 @@ fn temp_beside(path: &Path) -> io::Result<tempfile::NamedTempFile> {
         )
     })?;
     tempfile::Builder::new()
-        .prefix(&format!(".{}.", name.to_string_lossy()))
-        .suffix(".tmp")
+        .prefix(&temp_prefix(name))
+        .suffix(TEMP_SUFFIX)
+        .rand_bytes(TEMP_RAND)
         .tempfile_in(dir)
+}
+
+/// The temporary files of `name` are `.<name>.` + [`TEMP_RAND`] random
+/// ASCII letters and digits + [`TEMP_SUFFIX`].
+fn temp_prefix(name: &std::ffi::OsStr) -> String {
+    format!(".{}.", name.to_string_lossy())
+}
+const TEMP_SUFFIX: &str = ".tmp";
+const TEMP_RAND: usize = 6;
+
+/// A temporary file younger than this is never removed as stale: it may
+/// belong to a writer that has created it and not yet locked it.
+pub const STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// Removes the temporary files a killed writer of `path` left behind; returns
+/// how many were removed. A file is removed only when its name has exactly
+/// the writer's pattern for this `path` (`.<name>.XXXXXX.tmp`), it is a
+/// regular file (not a symlink), it was last modified at least
+/// [`STALE_AFTER`] ago, and no process holds its lock: every writer holds
+/// an exclusive `flock` on its temporary file while it writes, and the
+/// kernel releases it when the writer dies, so a live writer's file is
+/// never taken. Errors (an unreadable directory, a file that vanished)
+/// skip the file. Unix only; elsewhere nothing is removed.
+pub fn remove_stale(path: &Path) -> usize {
+    #[cfg(unix)]
+    {
+        let Some(name) = path.file_name() else {
+            return 0;
+        };
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        let prefix = temp_prefix(name);
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return 0;
+        };
+        let mut removed = 0;
+        for entry in entries.flatten() {
+            let file_name = entry.file_name();
+            let Some(n) = file_name.to_str() else {
+                continue;
+            };
+            let Some(rand) = n
+                .strip_prefix(prefix.as_str())
+                .and_then(|r| r.strip_suffix(TEMP_SUFFIX))
+            else {
+                continue;
+            };
+            if rand.len() != TEMP_RAND || !rand.bytes().all(|b| b.is_ascii_alphanumeric()) {
+                continue;
+            }
+            let p = entry.path();
+            if is_stale(&p) && std::fs::remove_file(&p).is_ok() {
+                removed += 1;
+            }
+        }
+        removed
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = path;
+        0
+    }
+}
+
+/// A regular file (not followed through a symlink), old enough, whose
+/// `flock` can be taken (the lock is dropped with the file).
+#[cfg(unix)]
+fn is_stale(p: &Path) -> bool {
+    let Ok(meta) = std::fs::symlink_metadata(p) else {
+        return false;
+    };
+    let old = meta
+        .modified()
+        .ok()
+        .and_then(|m| m.elapsed().ok())
+        .is_some_and(|age| age >= STALE_AFTER);
+    if !meta.file_type().is_file() || !old {
+        return false;
+    }
+    std::fs::File::open(p).is_ok_and(|f| try_lock(&f))
+}
+
+/// Takes an exclusive `flock` on `f` without waiting; false when another
+/// open file holds it (or locking fails).
+#[cfg(unix)]
+fn try_lock(f: &std::fs::File) -> bool {
+    use std::os::unix::io::AsRawFd;
+    // SAFETY: flock on a valid, open descriptor; no memory is passed.
+    unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) == 0 }
 }
 
 /// Checks that [`write_atomic`] could write `path` now: a temporary file
@@ -126,7 +220,14 @@ pub fn write_atomic_checked<T>(
     fill: impl FnOnce(&mut dyn Write) -> io::Result<T>,
     check: impl FnOnce(&Path) -> io::Result<()>,
 ) -> io::Result<T> {
+    remove_stale(path);
     let mut tmp = temp_beside(path)?;
+    // Held until the file is dropped (after the rename): marks it live
+    // for `remove_stale` in other processes.
+    #[cfg(unix)]
+    if !try_lock(tmp.as_file()) {
+        return Err(io::Error::last_os_error());
+    }
     let out = {
         let mut w = io::BufWriter::new(tmp.as_file_mut());
         let out = fill(&mut w)?;

@@ -40,8 +40,14 @@ use sha2::{Digest, Sha256};
 
 /// Largest accepted image side, in pixels (cells).
 pub const MAX_SIDE: u32 = 65535 * 4;
-/// Largest accepted number of cells (`width * height`).
+/// Largest accepted number of cells (`width * height`): the highest value
+/// [`MapLimits::max_cells`] may take.
 pub const MAX_CELLS: u64 = 1 << 31;
+/// Default [`MapLimits::max_cells`]: 2^28 cells (16384 x 16384).
+pub const DEFAULT_MAX_CELLS: u64 = 1 << 28;
+/// Decoded image bytes allowed per cell of [`MapLimits::max_cells`] (an
+/// 8-bit RGBA image of `max_cells` pixels; 16-bit or RGBA images of fewer).
+pub const DECODED_BYTES_PER_CELL: u64 = 4;
 /// Largest accepted YAML file, in bytes (a map description is a few lines).
 pub const MAX_YAML_BYTES: u64 = 1 << 20;
 /// Default `occupied_thresh` when an image is loaded without a YAML file
@@ -50,6 +56,36 @@ pub const DEFAULT_OCCUPIED_THRESH: f64 = 0.65;
 /// Default `free_thresh` when an image is loaded without a YAML file (the
 /// value of the ROS map_saver).
 pub const DEFAULT_FREE_THRESH: f64 = 0.196;
+
+/// How large a map image may be. Checked on the image header, before the
+/// pixels are decoded: at most `max_cells` cells (`width * height`) and at
+/// most `max_cells * DECODED_BYTES_PER_CELL` decoded bytes (the decoder's
+/// output: pixels x channels x 1 or 2 bytes per sample).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MapLimits {
+    /// Most cells; 1..=[`MAX_CELLS`] (larger values act as [`MAX_CELLS`]).
+    pub max_cells: u64,
+}
+
+impl MapLimits {
+    /// The cell limit, clamped to 1..=[`MAX_CELLS`].
+    pub fn cells(&self) -> u64 {
+        self.max_cells.clamp(1, MAX_CELLS)
+    }
+
+    /// Most decoded image bytes.
+    pub fn decoded_bytes(&self) -> u64 {
+        self.cells() * DECODED_BYTES_PER_CELL
+    }
+}
+
+impl Default for MapLimits {
+    fn default() -> Self {
+        MapLimits {
+            max_cells: DEFAULT_MAX_CELLS,
+        }
+    }
+}
 
 /// One grid cell's state.
 #[repr(u8)]
@@ -335,10 +371,16 @@ pub enum MapError {
         /// What went wrong.
         message: String,
     },
-    /// The image header declares more cells than the compiler accepts.
+    /// The image header declares more cells or decoded bytes than the
+    /// [`MapLimits`] allow (or a side longer than [`MAX_SIDE`]).
     #[error(
-        "{}: image is {width} x {height} pixels; the limit is {MAX_SIDE} per side and {MAX_CELLS} cells",
-        path.display()
+        "{}: image is {width} x {height} pixels ({} cells{}); the limit is {} cells, {} decoded \
+         bytes and {MAX_SIDE} pixels per side (--max-cells raises it, up to {MAX_CELLS})",
+        path.display(),
+        *width as u64 * *height as u64,
+        decoded.map(|d| format!(", {d} bytes decoded")).unwrap_or_default(),
+        limits.cells(),
+        limits.decoded_bytes()
     )]
     ImageTooLarge {
         /// The image file.
@@ -347,6 +389,10 @@ pub enum MapError {
         width: u32,
         /// Declared height.
         height: u32,
+        /// Decoded bytes the header declares, when the pixel format was read.
+        decoded: Option<u64>,
+        /// The limits in force.
+        limits: MapLimits,
     },
     /// The map has no free cell at all (wrong thresholds or `negate`?).
     #[error(
@@ -409,9 +455,18 @@ fn file_name(p: &Path) -> String {
 }
 
 /// Loads a ROS map_server YAML file and the image it names (relative to the
-/// YAML's directory unless absolute).
+/// YAML's directory unless absolute), within the default [`MapLimits`].
 pub fn load_yaml(path: &Path) -> Result<MapSource, MapError> {
-    let bytes = read_limited(path, MAX_YAML_BYTES)?;
+    load_yaml_within(path, &MapLimits::default())
+}
+
+/// [`load_yaml`] within the given [`MapLimits`].
+pub fn load_yaml_within(path: &Path, limits: &MapLimits) -> Result<MapSource, MapError> {
+    let bytes = read_limited(path, MAX_YAML_BYTES, || MapError::YamlSyntax {
+        path: path.to_path_buf(),
+        line: None,
+        message: format!("file is larger than {MAX_YAML_BYTES} bytes; not a map description"),
+    })?;
     let yaml_sha = sha256(&bytes);
     let text = std::str::from_utf8(&bytes).map_err(|e| MapError::YamlSyntax {
         path: path.to_path_buf(),
@@ -438,7 +493,7 @@ pub fn load_yaml(path: &Path) -> Result<MapSource, MapError> {
         free_thresh: desc.free_thresh,
         mode: desc.mode,
     };
-    let (grid_cells, width, height, image_sha) = load_pixels(&image_path, &pixels)?;
+    let (grid_cells, width, height, image_sha) = load_pixels(&image_path, &pixels, limits)?;
     let grid = OccupancyGrid {
         width,
         height,
@@ -507,14 +562,26 @@ pub fn check_given(
 /// defaults to `[0, 0, 0]`, and the ROS map_saver thresholds
 /// ([`DEFAULT_OCCUPIED_THRESH`], [`DEFAULT_FREE_THRESH`]), `negate: 0` and
 /// trinary mode apply.
+///
+/// The default [`MapLimits`] apply; [`load_image_within`] takes others.
 pub fn load_image(
     path: &Path,
     resolution: Option<f64>,
     origin: Option<[f64; 3]>,
 ) -> Result<MapSource, MapError> {
+    load_image_within(path, resolution, origin, &MapLimits::default())
+}
+
+/// [`load_image`] within the given [`MapLimits`].
+pub fn load_image_within(
+    path: &Path,
+    resolution: Option<f64>,
+    origin: Option<[f64; 3]>,
+    limits: &MapLimits,
+) -> Result<MapSource, MapError> {
     let yaml = path.with_extension("yaml");
     if yaml.is_file() {
-        let src = load_yaml(&yaml)?;
+        let src = load_yaml_within(&yaml, limits)?;
         if !same_file(&src.image_path, path) {
             return Err(MapError::ImageMismatch {
                 path: yaml,
@@ -558,7 +625,7 @@ pub fn load_image(
         free_thresh: DEFAULT_FREE_THRESH,
         mode: Mode::Trinary,
     };
-    let (cells, width, height, image_sha) = load_pixels(path, &params)?;
+    let (cells, width, height, image_sha) = load_pixels(path, &params, limits)?;
     let grid = OccupancyGrid {
         width,
         height,
@@ -597,8 +664,13 @@ fn sha256(bytes: &[u8]) -> [u8; 32] {
     h.finalize().into()
 }
 
-/// Reads a whole file, refusing files larger than `limit` bytes.
-fn read_limited(path: &Path, limit: u64) -> Result<Vec<u8>, MapError> {
+/// Reads a whole file, refusing files larger than `limit` bytes with the
+/// error `too_large` makes.
+fn read_limited(
+    path: &Path,
+    limit: u64,
+    too_large: impl FnOnce() -> MapError,
+) -> Result<Vec<u8>, MapError> {
     use std::io::Read;
     let io = |source| MapError::Io {
         path: path.to_path_buf(),
@@ -608,11 +680,7 @@ fn read_limited(path: &Path, limit: u64) -> Result<Vec<u8>, MapError> {
     let mut bytes = Vec::new();
     file.take(limit + 1).read_to_end(&mut bytes).map_err(io)?;
     if bytes.len() as u64 > limit {
-        return Err(MapError::YamlSyntax {
-            path: path.to_path_buf(),
-            line: None,
-            message: format!("file is larger than {limit} bytes; not a map description"),
-        });
+        return Err(too_large());
     }
     Ok(bytes)
 }
@@ -906,22 +974,33 @@ fn minimum_file_bytes(bytes: &[u8], width: u64, height: u64, decoded_bytes: u64)
 /// order, the dimensions and the SHA-256 of the file.
 ///
 /// Memory: the header is read first; the dimensions must be within
-/// [`MAX_SIDE`] / [`MAX_CELLS`] and the file large enough for the pixels it
+/// [`MAX_SIDE`] and the [`MapLimits`] (cells, then decoded bytes) and the file large enough for the pixels it
 /// declares ([`minimum_file_bytes`]) before the pixel buffer (the decoder's
 /// output: width x height x channels x 1 or 2 bytes) is allocated, and that
 /// allocation is fallible (an error, not an abort, when it cannot be had).
 /// The decoders' own working memory is capped at [`DECODER_WORKSPACE`].
-fn load_pixels(path: &Path, params: &Params) -> Result<(Vec<Cell>, u32, u32, [u8; 32]), MapError> {
+fn load_pixels(
+    path: &Path,
+    params: &Params,
+    limits: &MapLimits,
+) -> Result<(Vec<Cell>, u32, u32, [u8; 32]), MapError> {
     use image::{ColorType, ImageDecoder};
-    let bytes = std::fs::read(path).map_err(|source| MapError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let sha = sha256(&bytes);
     let decode_err = |message: String| MapError::ImageDecode {
         path: path.to_path_buf(),
         message,
     };
+    // No image within the limits needs a file larger than this (stored,
+    // uncompressed PNG data is the decoded bytes plus a few per row and
+    // block; PGM is the decoded bytes plus a header).
+    let file_limit = limits.decoded_bytes().saturating_mul(2) + (1 << 20);
+    let bytes = read_limited(path, file_limit, || {
+        decode_err(format!(
+            "file is larger than {file_limit} bytes, more than any image within {} cells \
+             needs (--max-cells raises it)",
+            limits.cells()
+        ))
+    })?;
+    let sha = sha256(&bytes);
     let mut r = image::ImageReader::new(Cursor::new(&bytes[..]))
         .with_guessed_format()
         .map_err(|e| decode_err(e.to_string()))?;
@@ -933,20 +1012,23 @@ fn load_pixels(path: &Path, params: &Params) -> Result<(Vec<Cell>, u32, u32, [u8
     // No dimension limits here (the check below gives the typed
     // `ImageTooLarge`); the pixel buffer is allocated by this function, not
     // by the decoder, so `max_alloc` only bounds the decoder's working memory.
-    let mut limits = image::Limits::no_limits();
-    limits.max_alloc = Some(DECODER_WORKSPACE);
-    r.limits(limits);
+    let mut decoder_limits = image::Limits::no_limits();
+    decoder_limits.max_alloc = Some(DECODER_WORKSPACE);
+    r.limits(decoder_limits);
     let decoder = r.into_decoder().map_err(|e| decode_err(e.to_string()))?;
     let (width, height) = decoder.dimensions();
     if width == 0 || height == 0 {
         return Err(decode_err(format!("image is {width} x {height} pixels")));
     }
-    if width > MAX_SIDE || height > MAX_SIDE || width as u64 * height as u64 > MAX_CELLS {
-        return Err(MapError::ImageTooLarge {
-            path: path.to_path_buf(),
-            width,
-            height,
-        });
+    let too_large = |decoded| MapError::ImageTooLarge {
+        path: path.to_path_buf(),
+        width,
+        height,
+        decoded,
+        limits: *limits,
+    };
+    if width > MAX_SIDE || height > MAX_SIDE || width as u64 * height as u64 > limits.cells() {
+        return Err(too_large(None));
     }
     let (channels, sample_bytes, has_alpha) = match decoder.color_type() {
         ColorType::L8 => (1, 1, false),
@@ -964,6 +1046,9 @@ fn load_pixels(path: &Path, params: &Params) -> Result<(Vec<Cell>, u32, u32, [u8
         }
     };
     let decoded = width as u64 * height as u64 * channels * sample_bytes;
+    if decoded > limits.decoded_bytes() {
+        return Err(too_large(Some(decoded)));
+    }
     if decoder.total_bytes() != decoded {
         return Err(decode_err(format!(
             "the decoder reports {} bytes for {width} x {height} pixels of {channels} x {sample_bytes} bytes",

@@ -1,6 +1,12 @@
 use super::*;
 use std::fs;
 
+/// The largest map-size limit: the file-size bounds behind the cell limit
+/// are tested with it.
+const WIDEST: MapLimits = MapLimits {
+    max_cells: MAX_CELLS,
+};
+
 /// Writes an 8-bit binary PGM, rows top first.
 fn write_pgm(path: &Path, w: usize, h: usize, px: &[u8]) {
     assert_eq!(px.len(), w * h);
@@ -492,10 +498,24 @@ fn huge_header_with_tiny_file() {
     fs::write(dir.path().join("h.pgm"), b"P5\n300000 2\n255\n\x00\x00").unwrap();
     let e = load_yaml(&y).unwrap_err();
     assert!(matches!(e, MapError::ImageTooLarge { .. }), "{e}");
-    // Within the limits but the file cannot hold that many pixels: refused
-    // before the decoder allocates 1.6 GB.
+    // Beyond the default --max-cells: refused from the header, naming the
+    // option and the true sizes.
     fs::write(dir.path().join("h.pgm"), b"P5\n40000 40000\n255\n\x00\x00").unwrap();
     let e = load_yaml(&y).unwrap_err();
+    assert!(
+        matches!(e, MapError::ImageTooLarge { decoded: None, .. }),
+        "{e}"
+    );
+    assert!(
+        e.to_string().contains(
+            "40000 x 40000 pixels (1600000000 cells); the limit is 268435456 cells, \
+             1073741824 decoded bytes"
+        ) && e.to_string().contains("--max-cells"),
+        "{e}"
+    );
+    // Within the largest limit but the file cannot hold that many pixels:
+    // refused before the decoder allocates 1.6 GB.
+    let e = load_yaml_within(&y, &WIDEST).unwrap_err();
     assert!(matches!(e, MapError::ImageDecode { .. }), "{e}");
     assert!(e.to_string().contains("truncated"), "{e}");
     // A PNG header claiming 40000 x 40000 in a few dozen bytes.
@@ -898,7 +918,16 @@ fn png_header_size_needs_a_file_to_match() {
                 assert!(f.len() as u64 <= len, "{} > {len}", f.len());
                 f.resize(len as usize, 0);
                 fs::write(&path, &f).unwrap();
-                let e = load_image(&path, Some(0.1), None).unwrap_err();
+                let e = load_image_within(&path, Some(0.1), None, &WIDEST).unwrap_err();
+                // 16-bit RGB(A) at 46000 x 46000: over the largest decoded
+                // size, refused from the header whatever the file length.
+                if let MapError::ImageTooLarge {
+                    decoded: Some(d), ..
+                } = e
+                {
+                    assert!(d > WIDEST.decoded_bytes(), "{e}");
+                    continue;
+                }
                 assert!(matches!(e, MapError::ImageDecode { .. }), "{e}");
                 let truncated = e.to_string().contains("truncated: the header claims");
                 assert_eq!(

@@ -32,6 +32,33 @@ pub struct Args {
     pub timings: bool,
     #[command(flatten)]
     pub opts: BuildOpts,
+    #[command(flatten)]
+    pub limits: MapLimitArgs,
+}
+
+/// The map-size limit of every command that loads a map image.
+#[derive(clap::Args, Debug, Clone)]
+pub struct MapLimitArgs {
+    /// Largest map accepted, in cells (width x height), checked on the image
+    /// header before any pixel is decoded; the decoded image may take up to 4
+    /// bytes per cell of this limit, and the file twice that plus 1 MiB
+    /// [default: 268435456 = 16384 x 16384; at most 2147483648].
+    #[arg(
+        long,
+        value_name = "CELLS",
+        default_value_t = mapfile::DEFAULT_MAX_CELLS,
+        hide_default_value = true,
+        value_parser = clap::value_parser!(u64).range(1..=mapfile::MAX_CELLS)
+    )]
+    pub max_cells: u64,
+}
+
+impl MapLimitArgs {
+    pub fn limits(&self) -> mapfile::MapLimits {
+        mapfile::MapLimits {
+            max_cells: self.max_cells,
+        }
+    }
 }
 
 /// Compile options shared by `build`, `demo` and `eval`.
@@ -179,7 +206,9 @@ pub fn load_map(
     map: &std::path::Path,
     resolution: Option<f64>,
     origin: Option<[f64; 3]>,
+    limits: &MapLimitArgs,
 ) -> Result<mapfile::MapSource, mapfile::MapError> {
+    let limits = limits.limits();
     let is_yaml = matches!(
         map.extension()
             .and_then(|e| e.to_str())
@@ -189,11 +218,11 @@ pub fn load_map(
     );
     if is_yaml {
         // The YAML gives both; a value given as well must agree with it.
-        let src = mapfile::load_yaml(map)?;
+        let src = mapfile::load_yaml_within(map, &limits)?;
         mapfile::check_given(&src, map, resolution, origin)?;
         Ok(src)
     } else {
-        mapfile::load_image(map, resolution, origin)
+        mapfile::load_image_within(map, resolution, origin, &limits)
     }
 }
 
@@ -224,7 +253,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         .map_err(|e| fail_err(anyhow::anyhow!("{}: cannot write: {e}", out.display())))?;
     let sp = ui.stage("loading map");
     let mut laps = pipeline::Laps::start();
-    let src = load_map(&a.map, a.resolution, a.origin).map_err(input_err)?;
+    let src = load_map(&a.map, a.resolution, a.origin, &a.limits).map_err(input_err)?;
     // The image (and the YAML) the map named are inputs too.
     mapc::writer::check_output_path(&out, &src.input_files()).map_err(refuse_out)?;
     laps.lap("load");

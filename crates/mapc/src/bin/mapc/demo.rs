@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use mapc::pipeline;
 
-use crate::build::{load_map, BuildOpts};
+use crate::build::{load_map, BuildOpts, MapLimitArgs};
 use crate::util::outln;
 use crate::util::{fail_err, input_err, CliResult, Ui};
 
@@ -29,6 +29,8 @@ pub struct Args {
     /// Seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    #[command(flatten)]
+    pub limits: MapLimitArgs,
 }
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
@@ -41,7 +43,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     std::fs::create_dir_all(&a.out)
         .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.out.display())))?;
     let t0 = Instant::now();
-    let src = load_map(&a.map, None, None).map_err(input_err)?;
+    let src = load_map(&a.map, None, None, &a.limits).map_err(input_err)?;
     let opts = BuildOpts {
         beams: 362,
         range_max: 30.0,
@@ -115,6 +117,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         tol_rate: 0.02,
         tol_false_accept: 0.01,
         tol_error_factor: 1.5,
+        limits: a.limits.clone(),
     };
     let quiet = Ui {
         quiet: true,

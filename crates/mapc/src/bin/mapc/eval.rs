@@ -91,6 +91,8 @@ pub struct Args {
     /// Allowed growth factor of mean errors.
     #[arg(long, default_value_t = 1.5)]
     pub tol_error_factor: f64,
+    #[command(flatten)]
+    pub limits: crate::build::MapLimitArgs,
 }
 
 fn fmt_summary(name: &str, s: &Summary) -> String {
@@ -356,7 +358,7 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
                 "wrong-map needs --foreign MAP.yaml"
             )));
         };
-        let src = crate::build::load_map(fp, None, None).map_err(input_err)?;
+        let src = crate::build::load_map(fp, None, None, &a.limits).map_err(input_err)?;
         let g = &src.grid;
         let bits = g.blocked_bits(true);
         let bg = refloc::raycast::BitGrid::new(g.width, g.height, &bits)

@@ -9,7 +9,7 @@ use mapc::pipeline;
 use mapc::plot;
 use mapc::render::{color, Corner, MapCanvas, MapLayer, Mark};
 
-use crate::build::{load_map, BuildOpts};
+use crate::build::{load_map, BuildOpts, MapLimitArgs};
 use crate::util::outln;
 use crate::util::{fail_err, input_err, parse_triple, CliResult, Ui};
 
@@ -34,10 +34,12 @@ pub struct Args {
     pub size: u32,
     #[command(flatten)]
     pub opts: BuildOpts,
+    #[command(flatten)]
+    pub limits: MapLimitArgs,
 }
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
-    let src = load_map(&a.map, a.resolution, a.origin).map_err(input_err)?;
+    let src = load_map(&a.map, a.resolution, a.origin, &a.limits).map_err(input_err)?;
     if let Some(out) = &a.output {
         let mut inputs = src.input_files();
         inputs.push(&a.map);

@@ -23,7 +23,7 @@ use mapc::gvd::{self, GvdOptions};
 use mapc::mapfile::Cell;
 use serde_json::json;
 
-use crate::build::{load_map, BuildOpts};
+use crate::build::{load_map, BuildOpts, MapLimitArgs};
 use crate::util::outln;
 use crate::util::{fail_err, input_err, parse_triple, CliResult, Ui};
 
@@ -45,6 +45,8 @@ pub struct Args {
     pub repeat: usize,
     #[command(flatten)]
     pub opts: BuildOpts,
+    #[command(flatten)]
+    pub limits: MapLimitArgs,
 }
 
 /// Writes a 2-D `.npy` array (format 1.0, C order).
@@ -80,7 +82,7 @@ fn timed<T>(n: usize, mut f: impl FnMut() -> T) -> (f64, f64, T) {
 }
 
 pub fn run(a: Args, _ui: &Ui) -> CliResult {
-    let src = load_map(&a.map, a.resolution, a.origin).map_err(input_err)?;
+    let src = load_map(&a.map, a.resolution, a.origin, &a.limits).map_err(input_err)?;
     let cfg = a.opts.config();
     let g = &src.grid;
     let (w, h) = (g.width as usize, g.height as usize);
