@@ -537,7 +537,7 @@ fn eval_runs_the_disturbance_suite() {
         assert!(correct * 10 >= n * 8, "{}: {correct} of {n}", class.name());
     }
     let o = mapc(
-        &["eval", db.to_str().unwrap(), "--experiments", "doors"],
+        &["eval", db.to_str().unwrap(), "--experiments", "windows"],
         dir.path(),
     );
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
