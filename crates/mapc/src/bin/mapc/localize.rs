@@ -217,6 +217,19 @@ fn scan_source(a: &Args, ui: &Ui) -> Result<Scans, CliError> {
     })
 }
 
+/// The output line for an input scan that could not be read.
+fn unreadable_line(e: &scanio::ScanError, text: bool) -> String {
+    if text {
+        format!(
+            "{:<12} error: {}",
+            e.id.clone().unwrap_or_else(|| format!("line {}", e.line)),
+            e.message
+        )
+    } else {
+        json!({"id": e.id, "line": e.line, "error": e.message}).to_string()
+    }
+}
+
 /// `--format`: text (true) or JSON (false).
 fn output_is_text(a: &Args) -> Result<bool, CliError> {
     match a.format.as_str() {
@@ -297,7 +310,7 @@ fn run_maps(a: &Args, ui: &Ui) -> CliResult {
             Ok(s) => s,
             Err(e) => {
                 failed += 1;
-                out.line(&json!({"id": e.id, "line": e.line, "error": e.message}).to_string())?;
+                out.line(&unreadable_line(&e, text))?;
                 continue;
             }
         };
@@ -432,16 +445,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             Ok(s) => s,
             Err(e) => {
                 failed += 1;
-                let line = if text {
-                    format!(
-                        "{:<12} error: {}",
-                        e.id.clone().unwrap_or_else(|| format!("line {}", e.line)),
-                        e.message
-                    )
-                } else {
-                    json!({"id": e.id, "line": e.line, "error": e.message}).to_string()
-                };
-                out.line(&line)?;
+                out.line(&unreadable_line(&e, text))?;
                 continue;
             }
         };
