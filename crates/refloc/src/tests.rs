@@ -1329,3 +1329,37 @@ fn a_prior_limits_the_answer_to_its_region_and_heading_window() {
         LocalizeError::BadPrior
     );
 }
+
+#[test]
+fn only_a_pose_that_explains_part_of_the_scan_is_refined() {
+    let buf = tiny_db();
+    let db = RefDb::new(buf.bytes()).unwrap();
+    let (truth, ranges) = truth_and_scan();
+    let scan = ranges_scan(&ranges);
+    let mut scratch = vec![0u8; scratch_size(db.params(), scan.len())];
+    let mut loc = crate::Localizer::new(&db, &mut scratch, scan.len()).unwrap();
+    loc.prepare(&scan).unwrap();
+    let max = |v: &crate::verify::Vicinity| crate::verify::HIT_SCORE * v.pairs as f32;
+    let p = *db.params();
+    let evidence = |v: &crate::verify::Vicinity| v.evidence(p.short_weight, p.occlusion_fit);
+    // A few centimetres and a degree off: refined towards the truth.
+    let near = Pose2::new(truth.x + 0.04, truth.y - 0.03, truth.theta + 0.02);
+    let before = loc.verify_pose(&near);
+    assert!(evidence(&before) >= crate::localize::REFINE_GATE * max(&before));
+    let (refined, v) = loc.refine_if_promising(near);
+    assert_ne!(refined, near);
+    let err = |q: &Pose2| (q.x - truth.x).hypot(q.y - truth.y);
+    assert!(err(&refined) < err(&near), "{refined:?}");
+    assert_eq!(v, loc.verify_pose(&refined));
+    assert!(evidence(&v) > evidence(&before));
+    // Turned half a turn, the scan fits almost nowhere: kept as it is.
+    let wrong = Pose2::new(truth.x, truth.y, truth.theta + PI);
+    let w = loc.verify_pose(&wrong);
+    assert!(
+        evidence(&w) < crate::localize::REFINE_GATE * max(&w),
+        "{w:?}"
+    );
+    let (kept, vk) = loc.refine_if_promising(wrong);
+    assert_eq!(kept, wrong);
+    assert_eq!(vk, w);
+}
