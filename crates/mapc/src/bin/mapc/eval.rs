@@ -42,7 +42,7 @@ pub struct Args {
     /// Outliers per scan in the dynamic runs (random short returns; and x-y swaps in dynamic-swap).
     #[arg(long, default_value_t = 60)]
     pub outliers: usize,
-    /// Experiments to run, comma separated: static, dynamic, dynamic-swap, e1, e2, wrong-map, and the disturbance suite: people, furniture-added, furniture-removed, doors, shifted, missing-returns, range-noise, angular-jitter, motion (or `disturbances` for all of them; docs/results.md).
+    /// Experiments to run, comma separated: static, dynamic, dynamic-swap, e1, e2, wrong-map, and the disturbance suite: people, furniture-added, furniture-removed, doors, shifted, missing-returns, range-noise, angular-jitter, motion, mount-error (or `disturbances` for all of them; docs/results.md).
     #[arg(
         long,
         default_value = "static,dynamic,dynamic-swap,e1",
