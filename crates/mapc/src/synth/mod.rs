@@ -21,12 +21,13 @@
 //! small per-room bookkeeping.
 //!
 //! Code map: this module holds the public types, the driver
-//! ([`generate`]) and the writer ([`write_ros_map`]); one module per
-//! generator (`office`, `warehouse`, `cave`) holds its layout rules with
-//! their parameters as named constants at the top; `draw` holds the
-//! geometry the generators share (metres <-> cells, rectangles, the
-//! oriented canvas, the building outline, furniture placement); `connect`
-//! keeps the largest free component (flood fill).
+//! ([`generate`]) and the writer ([`write_ros_map`]). One module per
+//! generator (`office`, with its furniture in `office::furnish`;
+//! `warehouse`; `cave`) holds its layout rules, their parameters named
+//! constants at the top. `draw` holds the geometry the generators share
+//! (metres <-> cells, rectangles, the oriented canvas, the building
+//! outline, furniture placement); `connect` keeps the largest free
+//! component (flood fill).
 
 use std::fmt;
 use std::fs::File;
