@@ -146,21 +146,30 @@ pub struct Args {
     pub no_candidates: bool,
     /// Prior region: the robot is within R m of (X, Y) (map frame); sites
     /// outside it (plus 2 m) are not ranked, poses outside it are no answer.
-    #[arg(
-        long,
-        value_name = "X,Y,R",
-        value_delimiter = ',',
-        allow_hyphen_values = true
-    )]
-    pub prior: Option<Vec<f32>>,
+    #[arg(long, value_name = "X,Y,R", allow_hyphen_values = true)]
+    pub prior: Option<Numbers>,
     /// Prior heading window: the robot faces THETA +- TOL degrees (map frame).
-    #[arg(
-        long,
-        value_name = "THETA,TOL",
-        value_delimiter = ',',
-        allow_hyphen_values = true
-    )]
-    pub prior_heading: Option<Vec<f32>>,
+    #[arg(long, value_name = "THETA,TOL", allow_hyphen_values = true)]
+    pub prior_heading: Option<Numbers>,
+}
+
+/// A comma-separated list of numbers in one argument (`--prior 1,-2,3`):
+/// one value for clap, so `--help` shows its name once.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Numbers(pub Vec<f32>);
+
+impl std::str::FromStr for Numbers {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        s.split(',')
+            .map(|t| {
+                t.trim()
+                    .parse::<f32>()
+                    .map_err(|e| format!("{t:?} is not a number: {e}"))
+            })
+            .collect::<Result<Vec<f32>, String>>()
+            .map(Numbers)
+    }
 }
 
 /// The scans of a stream of results.
@@ -247,18 +256,18 @@ fn prior_of(a: &Args) -> Result<Option<refloc::Prior>, CliError> {
         ("--prior X,Y,R", &a.prior, 3),
         ("--prior-heading THETA,TOL", &a.prior_heading, 2),
     ] {
-        if let Some(v) = v.as_ref().filter(|v| v.len() != n) {
+        if let Some(v) = v.as_ref().filter(|v| v.0.len() != n) {
             return Err(input_err(anyhow::anyhow!(
                 "{opt} takes {n} comma-separated numbers, not {}",
-                v.len()
+                v.0.len()
             )));
         }
     }
     let mut prior = a
         .prior
         .as_ref()
-        .map(|v| refloc::Prior::circle(v[0], v[1], v[2]));
-    if let Some(h) = &a.prior_heading {
+        .map(|v| refloc::Prior::circle(v.0[0], v.0[1], v.0[2]));
+    if let Some(Numbers(h)) = &a.prior_heading {
         prior = Some(
             prior
                 .unwrap_or(refloc::Prior::NONE)
