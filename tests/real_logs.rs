@@ -10,6 +10,8 @@
 //!   Measured when the bounds were set: 91.1% accepted and correct against
 //!   the given poses (4.7% false accepts: exactly those 19 scans); against
 //!   the corrected poses 95.8% and 0 false accepts (docs/results.md).
+//! - Every 5th scan of the Intel and ACES logs: regression bounds against
+//!   the corrected truth.
 //! - Scans simulated on the ACES map, localized against the Intel database:
 //!   at most 1% accepted (measured: 0 of 500).
 //! - A symmetric map (tb3-world): no pose accepted at the twin place
@@ -22,14 +24,31 @@ use mapc::scanio::{self, InputFormat, ReadOptions, ScanData};
 use rayon::prelude::*;
 use refloc::{localize, scratch_size, RangeScan, Scan};
 
-#[test]
-fn csail_log_against_csail_map() {
+/// What a real log gave: shares of the scans (0..=1) accepted and correct
+/// and accepted and wrong, against the given poses and against the poses
+/// corrected locally against the map; the median error (m) of the correct
+/// ones; the share of scans whose given pose is off by more than the
+/// tolerance.
+struct LogResult {
+    correct: f64,
+    false_acc: f64,
+    median: f64,
+    correct_c: f64,
+    false_c: f64,
+    truth_off: f64,
+}
+
+/// Localizes every `every`-th scan of the shared log `name` (CARMEN, `beams`
+/// beams a scan) against its map compiled with `mapc build` defaults, and
+/// checks that every answer is well formed (confidence, decision,
+/// hypotheses, covariance). `None` when the shared data is absent.
+fn real_log(name: &str, beams: usize, every: usize) -> Option<LogResult> {
     let (Some(map), Some(log), Some(truth)) = (
-        mapc::testdata::shared("maps/csail/csail.yaml"),
-        mapc::testdata::shared("logs/csail/csail-corrected.log.gz"),
-        mapc::testdata::shared("logs/csail/csail-poses-in-map.txt"),
+        mapc::testdata::shared(&format!("maps/{name}/{name}.yaml")),
+        mapc::testdata::shared(&format!("logs/{name}/{name}-corrected.log.gz")),
+        mapc::testdata::shared(&format!("logs/{name}/{name}-poses-in-map.txt")),
     ) else {
-        return;
+        return None;
     };
     let built = common::build(mapc::mapfile::load_yaml(&map).unwrap(), 150);
     let db = built.open();
@@ -43,16 +62,16 @@ fn csail_log_against_csail_map() {
         InputFormat::Auto,
         &ReadOptions::default(),
     )
-    .map(|s| s.expect("every CSAIL line parses"))
+    .map(|s| s.expect("every line parses"))
+    .enumerate()
+    .filter(|(k, _)| k % every == 0)
     .collect();
-    assert_eq!(scans.len(), 406);
     // (accepted and correct, accepted and wrong, error (m); the same two
     // against the locally corrected truth; given truth off by more than the
     // tolerance).
     type Outcome = (bool, bool, f64, bool, bool, bool);
     let results: Vec<Outcome> = scans
         .par_iter()
-        .enumerate()
         .map(|(k, s)| {
             let ScanData::Ranges {
                 angle_min,
@@ -64,7 +83,7 @@ fn csail_log_against_csail_map() {
             else {
                 panic!("CARMEN gives ranges")
             };
-            assert_eq!(ranges.len(), 361);
+            assert_eq!(ranges.len(), beams);
             let mut scratch = vec![0u8; scratch_size(db.params(), ranges.len())];
             let scan = Scan::Ranges(RangeScan {
                 angle_min: *angle_min,
@@ -73,7 +92,7 @@ fn csail_log_against_csail_map() {
                 range_max: *range_max,
                 ranges,
             });
-            let g = truth[&k];
+            let g = truth[k];
             let beams = s.data.beams();
             let sensor = refloc::Pose2::new(g[0] as f32, g[1] as f32, g[2] as f32)
                 .compose(&db.params().sensor.offset);
@@ -114,39 +133,81 @@ fn csail_log_against_csail_map() {
         })
         .collect();
     let n = results.len() as f64;
-    let correct = results.iter().filter(|r| r.0).count() as f64 / n;
-    let false_acc = results.iter().filter(|r| r.1).count() as f64 / n;
+    let share = |f: fn(&Outcome) -> bool| results.iter().filter(|r| f(r)).count() as f64 / n;
     let mut errs: Vec<f64> = results.iter().filter(|r| r.0).map(|r| r.2).collect();
     errs.sort_by(|a, b| a.total_cmp(b));
-    let median = errs[errs.len() / 2];
-    let share = |f: fn(&Outcome) -> bool| results.iter().filter(|r| f(r)).count() as f64 / n;
-    let correct_c = share(|r| r.3);
-    let false_c = share(|r| r.4);
-    let truth_off = share(|r| r.5);
+    let r = LogResult {
+        correct: share(|r| r.0),
+        false_acc: share(|r| r.1),
+        median: errs.get(errs.len() / 2).copied().unwrap_or(f64::NAN),
+        correct_c: share(|r| r.3),
+        false_c: share(|r| r.4),
+        truth_off: share(|r| r.5),
+    };
     eprintln!(
-        "CSAIL: accepted and correct {:.1}%, false accepts {:.1}%, median error {:.3} m; \
+        "{name} ({} scans): accepted and correct {:.1}%, false accepts {:.1}%, median error {:.3} m; \
          against the locally corrected truth {:.1}% and {:.1}%; given truth off by more \
          than the tolerance for {:.1}% of the scans",
-        100.0 * correct,
-        100.0 * false_acc,
-        median,
-        100.0 * correct_c,
-        100.0 * false_c,
-        100.0 * truth_off
+        results.len(),
+        100.0 * r.correct,
+        100.0 * r.false_acc,
+        r.median,
+        100.0 * r.correct_c,
+        100.0 * r.false_c,
+        100.0 * r.truth_off
     );
+    Some(r)
+}
+
+#[test]
+fn csail_log_against_csail_map() {
+    let Some(r) = real_log("csail", 361, 1) else {
+        return;
+    };
     // Measured with the default decision model (not fitted on CSAIL):
-    // 92.6% / 4.7% against the given poses, 97.3% / 0.0% against the
-    // corrected ones (docs/confidence.md).
-    assert!(correct >= 0.91, "accepted and correct {correct}");
+    // 92.9% / 4.7% against the given poses, 97.5% / 0.0% against the
+    // corrected ones (docs/results.md).
+    assert!(r.correct >= 0.91, "accepted and correct {}", r.correct);
     // The false accepts against the given poses cannot fall below the share
     // of scans whose given pose is off (4.7%); guard just above it.
-    assert!(false_acc <= 0.055, "false accepts {false_acc}");
-    assert!(median < 0.12, "median error {median}");
+    assert!(r.false_acc <= 0.055, "false accepts {}", r.false_acc);
+    assert!(r.median < 0.12, "median error {}", r.median);
     assert!(
-        correct_c >= 0.96,
-        "accepted and correct (corrected truth) {correct_c}"
+        r.correct_c >= 0.96,
+        "accepted and correct (corrected truth) {}",
+        r.correct_c
     );
-    assert!(false_c <= 0.01, "false accepts (corrected truth) {false_c}");
+    assert!(
+        r.false_c <= 0.01,
+        "false accepts (corrected truth) {}",
+        r.false_c
+    );
+}
+
+/// Regression bounds on every 5th scan of the Intel and ACES logs (182 and
+/// 88 scans; the whole logs take too long for CI). Measured when set
+/// (2026-12-04, against the corrected truth): Intel 81.9% / 4.4%, ACES
+/// 76.1% / 2.3%; the bounds leave a few scans of slack. Both logs were
+/// used to fit the decision model (docs/confidence.md), so these guard
+/// against regressions; they are not held-out figures.
+#[test]
+fn intel_and_aces_logs_do_not_regress() {
+    if let Some(r) = real_log("intel", 180, 5) {
+        assert!(
+            r.correct_c >= 0.78,
+            "Intel accepted and correct {}",
+            r.correct_c
+        );
+        assert!(r.false_c <= 0.06, "Intel false accepts {}", r.false_c);
+    }
+    if let Some(r) = real_log("aces", 180, 5) {
+        assert!(
+            r.correct_c >= 0.72,
+            "ACES accepted and correct {}",
+            r.correct_c
+        );
+        assert!(r.false_c <= 0.035, "ACES false accepts {}", r.false_c);
+    }
 }
 
 #[test]
