@@ -117,9 +117,9 @@ pub struct Args {
     pub db: Vec<PathBuf>,
     /// Scans: JSON Lines (sensor_msgs/LaserScan fields), a CARMEN log (.gz ok; "-" reads stdin), or a ROS 2 bag (rosbag2 MCAP, .mcap).
     pub input: String,
-    /// Output: json (one object per line) or text (a table).
-    #[arg(long, default_value = "json")]
-    pub format: String,
+    /// Output.
+    #[arg(long, value_enum, default_value_t = OutputFormat::Json)]
+    pub format: OutputFormat,
     /// Input format: auto (an MCAP file by its magic, else by the first line), jsonl, carmen or mcap.
     #[arg(long, default_value = "auto")]
     pub input_format: String,
@@ -239,15 +239,18 @@ fn unreadable_line(e: &scanio::ScanError, text: bool) -> String {
     }
 }
 
+/// `mapc localize --format`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum OutputFormat {
+    /// One JSON object per line.
+    Json,
+    /// A table.
+    Text,
+}
+
 /// `--format`: text (true) or JSON (false).
 fn output_is_text(a: &Args) -> Result<bool, CliError> {
-    match a.format.as_str() {
-        "json" => Ok(false),
-        "text" => Ok(true),
-        other => Err(input_err(anyhow::anyhow!(
-            "--format must be json or text, not '{other}'"
-        ))),
-    }
+    Ok(a.format == OutputFormat::Text)
 }
 
 /// The prior `--prior` and `--prior-heading` give, checked.

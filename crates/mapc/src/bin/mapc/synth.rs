@@ -10,9 +10,9 @@ use crate::util::{fail_err, input_err, parse_triple, CliResult, Ui};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Kind of map: office, warehouse or cave.
-    #[arg(long, default_value = "office")]
-    pub kind: String,
+    /// Kind of map.
+    #[arg(long, value_enum, default_value_t = SynthKind::Office)]
+    pub kind: SynthKind,
     /// Width (cells, at least 16).
     #[arg(long, default_value_t = 1000)]
     pub width: u32,
@@ -47,10 +47,7 @@ pub struct Args {
 const MIN_SIDE: u32 = 16;
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
-    let kind: SynthKind = a
-        .kind
-        .parse()
-        .map_err(|e| input_err(anyhow::anyhow!("--kind: {e}")))?;
+    let kind = a.kind;
     if !(a.resolution.is_finite() && a.resolution > 0.0) {
         return Err(input_err(anyhow::anyhow!(
             "--resolution must be a positive number of metres per cell"
