@@ -120,9 +120,9 @@ pub struct Args {
     /// Output.
     #[arg(long, value_enum, default_value_t = OutputFormat::Json)]
     pub format: OutputFormat,
-    /// Input format: auto (an MCAP file by its magic, else by the first line), jsonl, carmen or mcap.
-    #[arg(long, default_value = "auto")]
-    pub input_format: String,
+    /// Input format.
+    #[arg(long, value_enum, ignore_case = true, default_value_t = InputKind::Auto)]
+    pub input_format: InputKind,
     /// The sensor_msgs/msg/LaserScan topic of a bag; needed only when the bag has several.
     #[arg(long, value_name = "TOPIC")]
     pub topic: Option<String>,
@@ -175,22 +175,33 @@ impl std::str::FromStr for Numbers {
 /// The scans of a stream of results.
 type Scans = Box<dyn Iterator<Item = Result<scanio::InputScan, scanio::ScanError>>>;
 
+/// `mapc localize --input-format`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum InputKind {
+    /// An MCAP file by its magic, else by the first line.
+    Auto,
+    /// JSON Lines, sensor_msgs/LaserScan fields.
+    #[value(alias = "json", alias = "jsonlines", alias = "json-lines")]
+    Jsonl,
+    /// A CARMEN log.
+    #[value(alias = "log")]
+    Carmen,
+    /// A ROS 2 bag (rosbag2 MCAP).
+    #[value(alias = "bag", alias = "rosbag2")]
+    Mcap,
+}
+
 /// Opens the input the options name: a ROS 2 bag (by `--input-format` or
 /// its magic), else JSON Lines or a CARMEN log (a file or stdin).
 fn scan_source(a: &Args, ui: &Ui) -> Result<Scans, CliError> {
-    let want_bag = match a.input_format.to_ascii_lowercase().as_str() {
-        "mcap" | "bag" | "rosbag2" => true,
-        "auto" => a.input != "-" && scanio::bag::is_mcap(std::path::Path::new(&a.input)),
-        _ => false,
-    };
-    let fmt: InputFormat = if want_bag {
-        InputFormat::Auto
-    } else {
-        a.input_format.parse().map_err(|e| {
-            input_err(anyhow::anyhow!(
-                "--input-format: {e} (or mcap for a ROS 2 bag)"
-            ))
-        })?
+    let (want_bag, fmt) = match a.input_format {
+        InputKind::Mcap => (true, InputFormat::Auto),
+        InputKind::Auto => (
+            a.input != "-" && scanio::bag::is_mcap(std::path::Path::new(&a.input)),
+            InputFormat::Auto,
+        ),
+        InputKind::Jsonl => (false, InputFormat::JsonLines),
+        InputKind::Carmen => (false, InputFormat::Carmen),
     };
     if a.topic.is_some() && !want_bag {
         return Err(input_err(anyhow::anyhow!(
