@@ -275,7 +275,8 @@ fn prior_of(a: &Args) -> Result<Option<refloc::Prior>, CliError> {
 
 /// `mapc localize A.refdb B.refdb ... SCANS`: each scan against every
 /// database; the answer is the accepted localization with the highest
-/// confidence (its map, pose and confidence), or no map when none accepts.
+/// confidence (its map, pose and confidence), or no map when none accepts
+/// (`refloc::select::which_map`, the rule the Python package uses too).
 fn run_maps(a: &Args, ui: &Ui) -> CliResult {
     if a.truth.is_some() || a.mcap.is_some() || a.prior.is_some() || a.prior_heading.is_some() {
         return Err(input_err(anyhow::anyhow!(
@@ -331,10 +332,8 @@ fn run_maps(a: &Args, ui: &Ui) -> CliResult {
             }
         }
         let time_us = t0.elapsed().as_micros() as u64;
-        let best = per_map
-            .iter()
-            .filter(|m| m.1)
-            .max_by(|x, y| x.2.total_cmp(&y.2).then(y.0.cmp(&x.0)));
+        let best =
+            refloc::select::which_map(per_map.iter().map(|m| (m.1, m.2))).map(|i| &per_map[i]);
         match best {
             Some(b) => chosen[b.0] += 1,
             None => none += 1,
