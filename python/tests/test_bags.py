@@ -81,6 +81,26 @@ def test_topic_is_localized_with_its_stamps(work):
         assert (a["accepted"], a["x"], a["y"], a["theta"]) == (b["accepted"], b["x"], b["y"], b["theta"])
 
 
+def test_lz4_chunks_read_as_zstd_ones(work):
+    d, _ = work
+    zstd = results(localize(d, d / "multi.mcap", "--topic", "/scan", "--no-candidates"))
+    p = localize(d, d / "lz4.mcap", "--topic", "/scan", "--no-candidates")
+    assert p.returncode == 0, p.stderr
+    rs = results(p)
+    assert len(rs) == N
+    for a, b in zip(rs, zstd):
+        assert (a["id"], a["stamp_ns"], a["accepted"], a["x"], a["y"], a["theta"]) == \
+            (b["id"], b["stamp_ns"], b["accepted"], b["x"], b["y"], b["theta"])
+
+
+def test_unknown_chunk_compression_is_a_clear_error(work):
+    d, _ = work
+    p = localize(d, d / "brotli.mcap", "--topic", "/scan")
+    assert p.returncode != 0
+    said = p.stderr + p.stdout
+    assert "brz" in said and "not supported" in said and "zstd, lz4" in said, said
+
+
 def test_other_topic_types_are_refused(work):
     d, _ = work
     p = localize(d, d / "multi.mcap", "--topic", "/chatter")

@@ -97,7 +97,7 @@ Input formats (--input-format auto decides: an MCAP file by its magic, else by t
           Plain or gzip (.gz); '-' reads stdin (results then flushed one by one).
   carmen  CARMEN logs: FLASER, RLASER, ROBOTLASERk lines (--fov for FLASER/RLASER).
   mcap    ROS 2 bags in rosbag2's MCAP storage: sensor_msgs/msg/LaserScan (CDR) of one
-          topic (--topic when the bag has several); chunks uncompressed or zstd.
+          topic (--topic when the bag has several); chunks uncompressed, zstd or lz4.
 Outputs:
   stdout  --format json: one object per scan (pose, accepted, confidence, covariance,
           hypotheses, candidates, timing; stamp_ns, log_time_ns, frame_id for bag scans;
