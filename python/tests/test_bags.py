@@ -101,6 +101,18 @@ def test_unknown_chunk_compression_is_a_clear_error(work):
     assert "brz" in said and "not supported" in said and "zstd, lz4" in said, said
 
 
+def test_sqlite3_bag_is_refused_with_how_to_convert(work, tmp_path):
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+    d, _ = work
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    with Writer(tmp_path / "bag", version=8, storage_plugin=StoragePlugin.SQLITE3) as w:
+        w.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=ts)
+    p = localize(d, tmp_path / "bag" / "bag.db3")
+    assert p.returncode == 2 and p.stdout == ""
+    assert "SQLite file" in p.stderr and "--dst-storage mcap" in p.stderr, p.stderr
+
+
 def test_other_topic_types_are_refused(work):
     d, _ = work
     p = localize(d, d / "multi.mcap", "--topic", "/chatter")

@@ -143,11 +143,24 @@ pub struct Bag {
 
 /// True if the file at `path` starts with the MCAP magic.
 pub fn is_mcap(path: &Path) -> bool {
-    let mut head = [0u8; 8];
+    starts_with(path, MAGIC)
+}
+
+/// The magic of an SQLite database file: rosbag2's sqlite3 storage (`.db3`).
+pub const SQLITE_MAGIC: &[u8; 16] = b"SQLite format 3\0";
+
+/// True if the file at `path` is an SQLite database (a rosbag2 sqlite3
+/// bag, which this reader does not read: see docs/robot.md).
+pub fn is_sqlite(path: &Path) -> bool {
+    starts_with(path, SQLITE_MAGIC)
+}
+
+fn starts_with<const N: usize>(path: &Path, magic: &[u8; N]) -> bool {
+    let mut head = [0u8; N];
     File::open(path)
         .and_then(|mut f| f.read_exact(&mut head))
         .is_ok()
-        && &head == MAGIC
+        && &head == magic
 }
 
 /// Opens a bag, lists its channels and picks the LaserScan topic: `topic`

@@ -169,6 +169,12 @@ type Scans = Box<dyn Iterator<Item = Result<scanio::InputScan, scanio::ScanError
 /// Opens the input the options name: a ROS 2 bag (by `--input-format` or
 /// its magic), else JSON Lines or a CARMEN log (a file or stdin).
 fn scan_source(a: &Args, ui: &Ui) -> Result<Scans, CliError> {
+    if a.input != "-" && scanio::bag::is_sqlite(std::path::Path::new(&a.input)) {
+        return Err(input_err(anyhow::anyhow!(
+            "{} is an SQLite file (a rosbag2 sqlite3 .db3 bag?); mapc reads rosbag2's MCAP storage only: convert it with `ros2 bag convert` or `rosbags-convert --src BAG_DIR --dst OUT_DIR --dst-storage mcap`",
+            a.input
+        )));
+    }
     let want_bag = match a.input_format.to_ascii_lowercase().as_str() {
         "mcap" | "bag" | "rosbag2" => true,
         "auto" => a.input != "-" && scanio::bag::is_mcap(std::path::Path::new(&a.input)),
