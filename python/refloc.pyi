@@ -89,6 +89,43 @@ class Localizer:
         considered. Raises LocalizeError when the scan cannot be localized,
         ValueError for a prior that makes no sense."""
 
+class WhichMap:
+    """Which map a scan is on (MapSet.localize), with its answer on each."""
+    @property
+    def map_index(self) -> Optional[int]:
+        """Index of the map the scan is on (in the order given), or None when no map accepts it."""
+    @property
+    def accepted(self) -> bool:
+        """Some map accepts the scan (map_index is not None)."""
+    @property
+    def localization(self) -> Optional[Localization]:
+        """The answer on the map the scan is on, or None."""
+    @property
+    def maps(self) -> list[Optional[Localization]]:
+        """The answer on each map, in order; None where the scan could not be localized."""
+    @property
+    def reasons(self) -> list[Optional[str]]:
+        """Why the scan could not be localized on each map (the runtime's message), None where it was."""
+
+class MapSet:
+    """Localizes scans against several databases (floors, buildings) and says
+    which map each scan is on, by the rule of `mapc localize A.refdb B.refdb
+    ... SCANS`: the accepted answer with the highest confidence (the earlier
+    map on a tie), or no map. Each database has its own scratch memory."""
+    def __init__(self, dbs: Sequence[RefDb], max_beams: int = 2048) -> None: ...
+    @property
+    def dbs(self) -> list[RefDb]: ...
+    def localize(self, ranges: _Ranges, angle_min: float, angle_increment: float,
+                 range_min: float = 0.0, range_max: float = 30.0) -> WhichMap:
+        """Localizes one scan (as Localizer.localize, without priors) against
+        every database, the GIL released, and says which map it is on. A scan
+        that cannot be localized on a map is no answer there, not an error."""
+
+def localize_maps(dbs: Sequence[RefDb], ranges: _Ranges, angle_min: float,
+                  angle_increment: float, range_min: float = 0.0,
+                  range_max: float = 30.0) -> WhichMap:
+    """Which of the databases the scan is on (see MapSet); allocates the scratch per call."""
+
 def build(map_yaml: Union[str, PathLike[str]], out_path: Union[str, PathLike[str]],
           beams: int = 362, range_max: float = 30.0, seed: int = 1,
           accept_confidence: float = 0.8) -> int:

@@ -1,7 +1,11 @@
 """Python overhead of refloc.Localizer.localize against the runtime alone
 (`mapc localize --threads 1` time_us) on the same simulated scans, one run.
 
-    python python/bench/overhead.py DB.refdb path/to/mapc
+    python python/bench/overhead.py DB.refdb target/release/mapc
+
+Give a release mapc (the debug profile leaves refloc unoptimized) and the
+extension built in release (pip install ./python, maturin develop --release).
+Figures: docs/performance.md, "Python binding overhead".
 """
 import json, math, statistics, subprocess, sys, time
 import tempfile

@@ -175,11 +175,7 @@ impl Localizer {
     #[new]
     #[pyo3(signature = (db, max_beams=2048))]
     fn new(db: Bound<'_, RefDb>, max_beams: usize) -> PyResult<Self> {
-        if max_beams == 0 || max_beams > 1 << 16 {
-            return Err(PyValueError::new_err(format!(
-                "max_beams must be 1..=65536, got {max_beams}"
-            )));
-        }
+        check_max_beams(max_beams)?;
         let size = refloc::scratch_size(db.get().db.params(), max_beams);
         Ok(Localizer {
             db: db.unbind(),
@@ -215,18 +211,212 @@ impl Localizer {
         let view = ranges.as_slice()?;
         let scratch = &mut self.scratch;
         py.detach(|| {
-            let scan = refloc::Scan::Ranges(refloc::RangeScan {
-                angle_min,
-                angle_increment,
-                range_min,
-                range_max,
-                ranges: view,
-            });
+            let scan = range_scan(view, angle_min, angle_increment, range_min, range_max);
             refloc::localize_with_prior(&db.db, &scan, scratch, prior)
                 .map(|l| Localization::of(&l))
                 .map_err(|e| LocalizeError::new_err(e.to_string()))
         })
     }
+}
+
+/// Localizes scans against several databases (floors, buildings) and says
+/// which map each scan is on, by the rule of `mapc localize A.refdb B.refdb
+/// ... SCANS` (`refloc::select::which_map`): the accepted answer with the
+/// highest confidence, the earlier map on a tie, or no map. Each database
+/// has its own scratch memory, sized for scans of up to `max_beams` beams.
+#[pyclass(module = "refloc")]
+struct MapSet {
+    dbs: Vec<Py<RefDb>>,
+    scratch: Vec<Vec<u8>>,
+}
+
+#[pymethods]
+impl MapSet {
+    #[new]
+    #[pyo3(signature = (dbs, max_beams=2048))]
+    fn new(dbs: Vec<Bound<'_, RefDb>>, max_beams: usize) -> PyResult<Self> {
+        if dbs.is_empty() {
+            return Err(PyValueError::new_err("MapSet needs at least one RefDb"));
+        }
+        check_max_beams(max_beams)?;
+        let scratch = dbs
+            .iter()
+            .map(|db| vec![0u8; refloc::scratch_size(db.get().db.params(), max_beams)])
+            .collect();
+        Ok(MapSet {
+            dbs: dbs.into_iter().map(Bound::unbind).collect(),
+            scratch,
+        })
+    }
+
+    /// The databases, in the order given.
+    #[getter]
+    fn dbs(&self, py: Python<'_>) -> Vec<Py<RefDb>> {
+        self.dbs.iter().map(|d| d.clone_ref(py)).collect()
+    }
+
+    /// Localizes one scan (the arguments of `Localizer.localize`, without
+    /// priors) against every database, the GIL released, and says which
+    /// map it is on.
+    #[pyo3(signature = (ranges, angle_min, angle_increment, range_min=0.0, range_max=30.0))]
+    fn localize(
+        &mut self,
+        ranges: PyArrayLike1<'_, f32, AllowTypeChange>,
+        angle_min: f32,
+        angle_increment: f32,
+        range_min: f32,
+        range_max: f32,
+    ) -> PyResult<WhichMap> {
+        let py = ranges.py();
+        let view = ranges.as_slice()?;
+        let dbs: Vec<&refloc::RefDb<memmap2::Mmap>> =
+            self.dbs.iter().map(|d| &d.get().db).collect();
+        let scratch = &mut self.scratch;
+        let answers: Vec<Result<Localization, String>> = py.detach(|| {
+            let scan = range_scan(view, angle_min, angle_increment, range_min, range_max);
+            dbs.iter()
+                .zip(scratch.iter_mut())
+                .map(|(db, s)| {
+                    refloc::localize(db, &scan, s)
+                        .map(|l| Localization::of(&l))
+                        .map_err(|e| e.to_string())
+                })
+                .collect()
+        });
+        let map_index = refloc::select::which_map(answers.iter().map(|a| {
+            a.as_ref()
+                .map_or((false, 0.0), |l| (l.accepted, l.confidence))
+        }));
+        let mut maps = Vec::with_capacity(answers.len());
+        let mut reasons = Vec::with_capacity(answers.len());
+        for a in answers {
+            match a {
+                Ok(l) => {
+                    maps.push(Some(Py::new(py, l)?));
+                    reasons.push(None);
+                }
+                Err(e) => {
+                    maps.push(None);
+                    reasons.push(Some(e));
+                }
+            }
+        }
+        Ok(WhichMap {
+            map_index,
+            maps,
+            reasons,
+        })
+    }
+}
+
+/// Which map a scan is on (`MapSet.localize`), with its answer on each.
+#[pyclass(frozen, module = "refloc")]
+struct WhichMap {
+    map_index: Option<usize>,
+    maps: Vec<Option<Py<Localization>>>,
+    reasons: Vec<Option<String>>,
+}
+
+#[pymethods]
+impl WhichMap {
+    /// Index of the map the scan is on (in the order given), or None when
+    /// no map accepts it.
+    #[getter]
+    fn map_index(&self) -> Option<usize> {
+        self.map_index
+    }
+
+    /// Some map accepts the scan (`map_index` is not None).
+    #[getter]
+    fn accepted(&self) -> bool {
+        self.map_index.is_some()
+    }
+
+    /// The answer on the map the scan is on, or None.
+    #[getter]
+    fn localization(&self, py: Python<'_>) -> Option<Py<Localization>> {
+        self.map_index
+            .and_then(|i| self.maps[i].as_ref().map(|l| l.clone_ref(py)))
+    }
+
+    /// The answer on each map, in order; None where the scan could not be
+    /// localized (`reasons` says why).
+    #[getter]
+    fn maps(&self, py: Python<'_>) -> Vec<Option<Py<Localization>>> {
+        self.maps
+            .iter()
+            .map(|m| m.as_ref().map(|l| l.clone_ref(py)))
+            .collect()
+    }
+
+    /// Why the scan could not be localized on each map (the runtime's
+    /// message), None where it was.
+    #[getter]
+    fn reasons(&self) -> Vec<Option<String>> {
+        self.reasons.clone()
+    }
+
+    fn __repr__(&self) -> String {
+        match self
+            .map_index
+            .and_then(|i| self.maps[i].as_ref().map(|l| (i, l.get())))
+        {
+            Some((i, l)) => format!(
+                "WhichMap(map_index={i}, x={:.3}, y={:.3}, theta={:.4}, confidence={:.4})",
+                l.x, l.y, l.theta, l.confidence
+            ),
+            None => "WhichMap(map_index=None)".to_string(),
+        }
+    }
+}
+
+/// Which of the databases `dbs` the scan is on (see `MapSet`); allocates
+/// the scratch memory for this call.
+#[pyfunction]
+#[pyo3(signature = (dbs, ranges, angle_min, angle_increment, range_min=0.0, range_max=30.0))]
+fn localize_maps(
+    dbs: Vec<Bound<'_, RefDb>>,
+    ranges: PyArrayLike1<'_, f32, AllowTypeChange>,
+    angle_min: f32,
+    angle_increment: f32,
+    range_min: f32,
+    range_max: f32,
+) -> PyResult<WhichMap> {
+    let beams = ranges.len()?;
+    MapSet::new(dbs, beams.max(1))?.localize(
+        ranges,
+        angle_min,
+        angle_increment,
+        range_min,
+        range_max,
+    )
+}
+
+/// `max_beams` of a `Localizer` or `MapSet`: 1..=65536.
+fn check_max_beams(max_beams: usize) -> PyResult<()> {
+    if max_beams == 0 || max_beams > 1 << 16 {
+        return Err(PyValueError::new_err(format!(
+            "max_beams must be 1..=65536, got {max_beams}"
+        )));
+    }
+    Ok(())
+}
+
+/// The runtime's scan of `ranges` with the `sensor_msgs/LaserScan` fields.
+fn range_scan(
+    ranges: &[f32],
+    angle_min: f32,
+    angle_increment: f32,
+    range_min: f32,
+    range_max: f32,
+) -> refloc::Scan<'_> {
+    refloc::Scan::Ranges(refloc::RangeScan {
+        angle_min,
+        angle_increment,
+        range_min,
+        range_max,
+        ranges,
+    })
 }
 
 /// The runtime's prior of `region=(x, y, radius)` and `heading=(theta,
@@ -421,7 +611,10 @@ fn refloc_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Localizer>()?;
     m.add_class::<Localization>()?;
     m.add_class::<Hypothesis>()?;
+    m.add_class::<MapSet>()?;
+    m.add_class::<WhichMap>()?;
     m.add_function(wrap_pyfunction!(build, m)?)?;
+    m.add_function(wrap_pyfunction!(localize_maps, m)?)?;
     let py = m.py();
     m.add("RefDbError", py.get_type::<RefDbError>())?;
     m.add("LocalizeError", py.get_type::<LocalizeError>())?;

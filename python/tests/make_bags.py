@@ -5,15 +5,18 @@ for the tests of `mapc localize BAG`, with the independent `mcap` and
     python make_bags.py SCANS.jsonl OUT_DIR
 
 SCANS.jsonl holds LaserScan dicts (`mapc eval --dump` output). Writes
-multi.mcap (LaserScans on /scan and /scan_rear, plus /chatter and /odom),
-truncated.mcap (multi.mcap cut inside its data), noscan.mcap (/chatter and
-/odom only). Stamps: scan k at STAMP0 + k * 0.1 s.
+multi.mcap (LaserScans on /scan and /scan_rear, plus /chatter and /odom;
+zstd chunks), lz4.mcap (the same with lz4 chunks), brotli.mcap (lz4.mcap
+with its chunks' compression renamed to one no reader knows), truncated.mcap
+(multi.mcap cut inside its data), noscan.mcap (/chatter and /odom only).
+Stamps: scan k at STAMP0 + k * 0.1 s.
 """
 import json
 import math
 import sys
 from pathlib import Path
 
+from mcap.writer import CompressionType
 from mcap_ros2.writer import Writer
 
 STAMP0 = 1_733_270_400  # s; 2024-12-04 00:00 UTC
@@ -58,9 +61,10 @@ def laser_msg(s, k, frame):
     }
 
 
-def write_bag(path, scans, scan_topics, others=True, chunk_size=8192):
+def write_bag(path, scans, scan_topics, others=True, chunk_size=8192,
+              compression=CompressionType.ZSTD):
     with open(path, "wb") as f:
-        w = Writer(f, chunk_size=chunk_size)
+        w = Writer(f, chunk_size=chunk_size, compression=compression)
         ls = w.register_msgdef("sensor_msgs/msg/LaserScan", LASER_SCAN)
         st = w.register_msgdef("std_msgs/msg/String", STRING)
         p2 = w.register_msgdef("geometry_msgs/msg/Pose2D", POSE2D)
@@ -81,6 +85,13 @@ def make_all(scans, out):
     out.mkdir(parents=True, exist_ok=True)
     write_bag(out / "multi.mcap", scans, ["/scan", "/scan_rear"])
     write_bag(out / "noscan.mcap", scans, [])
+    write_bag(out / "lz4.mcap", scans, ["/scan", "/scan_rear"], compression=CompressionType.LZ4)
+    # The compression name is a length-prefixed string in each chunk (and
+    # chunk index) record: "lz4" -> "brz", same length, nothing else moves.
+    lz4 = (out / "lz4.mcap").read_bytes()
+    name = b"\x03\x00\x00\x00lz4"
+    assert lz4.count(name) >= 2
+    (out / "brotli.mcap").write_bytes(lz4.replace(name, b"\x03\x00\x00\x00brz"))
     data = (out / "multi.mcap").read_bytes()
     (out / "truncated.mcap").write_bytes(data[: len(data) * 6 // 10])
     return out

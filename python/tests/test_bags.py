@@ -81,6 +81,38 @@ def test_topic_is_localized_with_its_stamps(work):
         assert (a["accepted"], a["x"], a["y"], a["theta"]) == (b["accepted"], b["x"], b["y"], b["theta"])
 
 
+def test_lz4_chunks_read_as_zstd_ones(work):
+    d, _ = work
+    zstd = results(localize(d, d / "multi.mcap", "--topic", "/scan", "--no-candidates"))
+    p = localize(d, d / "lz4.mcap", "--topic", "/scan", "--no-candidates")
+    assert p.returncode == 0, p.stderr
+    rs = results(p)
+    assert len(rs) == N
+    for a, b in zip(rs, zstd):
+        assert (a["id"], a["stamp_ns"], a["accepted"], a["x"], a["y"], a["theta"]) == \
+            (b["id"], b["stamp_ns"], b["accepted"], b["x"], b["y"], b["theta"])
+
+
+def test_unknown_chunk_compression_is_a_clear_error(work):
+    d, _ = work
+    p = localize(d, d / "brotli.mcap", "--topic", "/scan")
+    assert p.returncode != 0
+    said = p.stderr + p.stdout
+    assert "brz" in said and "not supported" in said and "zstd, lz4" in said, said
+
+
+def test_sqlite3_bag_is_refused_with_how_to_convert(work, tmp_path):
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+    d, _ = work
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    with Writer(tmp_path / "bag", version=8, storage_plugin=StoragePlugin.SQLITE3) as w:
+        w.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=ts)
+    p = localize(d, tmp_path / "bag" / "bag.db3")
+    assert p.returncode == 2 and p.stdout == ""
+    assert "SQLite file" in p.stderr and "--dst-storage mcap" in p.stderr, p.stderr
+
+
 def test_other_topic_types_are_refused(work):
     d, _ = work
     p = localize(d, d / "multi.mcap", "--topic", "/chatter")

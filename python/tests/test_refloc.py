@@ -143,3 +143,62 @@ def test_priors_narrow_the_search(db_path):
         loc.localize(ranges, amin, inc, region=(x, y, -1.0))
     with pytest.raises(ValueError):
         db.localize(ranges, amin, inc, heading=(math.nan, 0.1))
+
+
+@pytest.fixture(scope="module")
+def other_dbs(tmp_path_factory):
+    """Two more buildings: synthetic maps (an office and a warehouse of other
+    layouts), compiled by the CLI with a short confidence fit."""
+    d = tmp_path_factory.mktemp("other")
+    out = []
+    for kind, seed in (("office", 7), ("warehouse", 3)):
+        subprocess.run([MAPC, "synth", "--kind", kind, "--width", "240", "--height", "200",
+                        "--seed", str(seed), "--name", kind, "-o", str(d)],
+                       check=True, capture_output=True)
+        db = d / f"{kind}.refdb"
+        subprocess.run([MAPC, "build", "-q", str(d / f"{kind}.yaml"), "-o", str(db),
+                        "--fit-queries", "40"], check=True, capture_output=True)
+        out.append(db)
+    return out
+
+
+def test_which_map_picks_the_map_the_scan_was_made_on(db_path, other_dbs, tmp_path):
+    office, warehouse = (refloc.RefDb(p) for p in other_dbs)
+    demo = refloc.RefDb(db_path)
+    dbs = [office, demo, warehouse]
+    maps = refloc.MapSet(dbs, max_beams=1024)
+    assert [d.site_count for d in maps.dbs] == [d.site_count for d in dbs]
+    scans = []
+    for src, want in ((demo, 1), (office, 0)):
+        for k in (src.site_count // 3, 2 * src.site_count // 3):
+            x, y = src.site_position(k)
+            ranges, amin, inc = src.simulate_scan(x + 0.1, y - 0.1, 0.3 + k, beams=360)
+            scans.append((ranges, amin, inc, want, (x + 0.1, y - 0.1)))
+    for ranges, amin, inc, want, (x, y) in scans:
+        r = maps.localize(ranges, amin, inc)
+        assert r.map_index == want and r.accepted, (r, [m and m.confidence for m in r.maps])
+        assert len(r.maps) == len(r.reasons) == 3
+        assert r.localization.pose == r.maps[want].pose
+        if want == 1:
+            # (Not on the synthetic office: a corridor there lets one of
+            # these scans slide 1.8 m along it, accepted.)
+            assert math.hypot(r.localization.x - x, r.localization.y - y) < 0.3
+    # The one-call form gives the same answer.
+    ranges, amin, inc, want, _ = scans[0]
+    assert refloc.localize_maps(dbs, ranges, amin, inc).map_index == want
+    # The CLI's several-map answer on the same scans: the same map each time.
+    jl = tmp_path / "scans.jsonl"
+    jl.write_text("".join(json.dumps({
+        "id": str(k), "angle_min": amin, "angle_increment": inc, "range_min": 0.0, "range_max": 30.0,
+        "ranges": [float(v) if math.isfinite(v) else None for v in ranges]}) + "\n"
+        for k, (ranges, amin, inc, _, _) in enumerate(scans)))
+    p = subprocess.run([MAPC, "localize", *map(str, other_dbs[:1] + [db_path] + other_dbs[1:]), str(jl)],
+                       check=True, capture_output=True, text=True)
+    cli = [json.loads(l)["map_index"] for l in p.stdout.splitlines()]
+    assert cli == [w for *_, w, _ in scans]
+    # A scan no map can localize: no map, a reason for each.
+    r = maps.localize(np.full(360, np.inf, dtype=np.float32), 0.0, 2 * math.pi / 360)
+    assert r.map_index is None and not r.accepted and r.localization is None
+    assert r.maps == [None, None, None] and all(r.reasons)
+    with pytest.raises(ValueError):
+        refloc.MapSet([])

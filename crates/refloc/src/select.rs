@@ -268,9 +268,39 @@ pub fn accepted(best: &Candidate, ambiguous: bool) -> bool {
     passes(best) && !ambiguous
 }
 
+/// Which of several maps a scan is on, from its answer on each map in
+/// order (`(accepted, confidence)`; a map where it could not be localized
+/// counts as not accepted): the index of the accepted answer with the
+/// highest confidence, the earlier map on a tie, or `None` when no map
+/// accepts it. The rule of `mapc localize A.refdb B.refdb ...` and of the
+/// Python package's `MapSet`.
+pub fn which_map<I: IntoIterator<Item = (bool, f32)>>(answers: I) -> Option<usize> {
+    let mut best: Option<(usize, f32)> = None;
+    for (i, (accepted, confidence)) in answers.into_iter().enumerate() {
+        if accepted && best.is_none_or(|(_, c)| confidence.total_cmp(&c).is_gt()) {
+            best = Some((i, confidence));
+        }
+    }
+    best.map(|(i, _)| i)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_map_is_the_accepted_answer_with_the_highest_confidence() {
+        assert_eq!(which_map([]), None);
+        assert_eq!(which_map([(false, 0.99), (false, 0.5)]), None);
+        // A higher confidence that is not accepted does not count.
+        assert_eq!(
+            which_map([(false, 0.99), (true, 0.85), (true, 0.9)]),
+            Some(2)
+        );
+        // A tie goes to the earlier map.
+        assert_eq!(which_map([(true, 0.9), (true, 0.9)]), Some(0));
+        assert_eq!(which_map([(false, 0.0), (true, 0.8), (true, 0.8)]), Some(1));
+    }
 
     #[test]
     fn a_twin_place_as_good_caps_the_confidence_and_is_rejected() {

@@ -143,11 +143,24 @@ pub struct Bag {
 
 /// True if the file at `path` starts with the MCAP magic.
 pub fn is_mcap(path: &Path) -> bool {
-    let mut head = [0u8; 8];
+    starts_with(path, MAGIC)
+}
+
+/// The magic of an SQLite database file: rosbag2's sqlite3 storage (`.db3`).
+pub const SQLITE_MAGIC: &[u8; 16] = b"SQLite format 3\0";
+
+/// True if the file at `path` is an SQLite database (a rosbag2 sqlite3
+/// bag, which this reader does not read: see docs/robot.md).
+pub fn is_sqlite(path: &Path) -> bool {
+    starts_with(path, SQLITE_MAGIC)
+}
+
+fn starts_with<const N: usize>(path: &Path, magic: &[u8; N]) -> bool {
+    let mut head = [0u8; N];
     File::open(path)
         .and_then(|mut f| f.read_exact(&mut head))
         .is_ok()
-        && &head == MAGIC
+        && &head == magic
 }
 
 /// Opens a bag, lists its channels and picks the LaserScan topic: `topic`
@@ -192,6 +205,15 @@ pub fn open_bag(path: &Path, topic: Option<&str>) -> Result<Bag, BagError> {
             }
         }
     }
+    // Nothing readable before the damage (a chunk compression this reader
+    // does not know, say): the damage is the answer, with or without --topic.
+    if let (Some(what), true) = (&damage, channels.is_empty()) {
+        return Err(BagError::Mcap {
+            path: path.to_owned(),
+            at: stream.bytes,
+            what: what.clone(),
+        });
+    }
     let mut topics: Vec<BagTopic> = channels
         .iter()
         .map(|(id, (t, schema_id, enc))| BagTopic {
@@ -227,13 +249,6 @@ pub fn open_bag(path: &Path, topic: Option<&str>) -> Result<Bag, BagError> {
         },
         None => match scan_topics.as_slice() {
             [] => {
-                if let (Some(what), true) = (&damage, topics.is_empty()) {
-                    return Err(BagError::Mcap {
-                        path: path.to_owned(),
-                        at: stream.bytes,
-                        what: what.clone(),
-                    });
-                }
                 return Err(BagError::NoScanTopic {
                     path: path.to_owned(),
                     topics,
@@ -479,7 +494,7 @@ fn mcap_message(e: &mcap::McapError) -> String {
                 .into()
         }
         mcap::McapError::UnsupportedCompression(c) => format!(
-            "chunk compression {c:?} is not supported (only zstd and none); re-compress with `mcap compress --compression zstd`"
+            "chunk compression {c:?} is not supported (only zstd, lz4 and none); re-compress with `mcap compress --compression zstd`"
         ),
         other => other.to_string(),
     }
@@ -533,8 +548,12 @@ mod tests {
     }
 
     #[test]
-    fn reads_plain_and_zstd_bags() {
-        for c in [None, Some(mcap::Compression::Zstd)] {
+    fn reads_plain_zstd_and_lz4_bags() {
+        for c in [
+            None,
+            Some(mcap::Compression::Zstd),
+            Some(mcap::Compression::Lz4),
+        ] {
             let got = read_all(&bag_bytes(20, c)).unwrap();
             assert_eq!(got.len(), 20);
             let s = got[7].as_ref().unwrap();
@@ -542,6 +561,36 @@ mod tests {
             assert_eq!(s.stamp.as_ref().unwrap().ns, 7000);
             assert_eq!(s.data.len(), 5);
         }
+    }
+
+    #[test]
+    fn an_unknown_chunk_compression_is_named_in_the_error() {
+        // The chunk records' compression string, renamed (same length).
+        let name = b"\x04\x00\x00\x00zstd";
+        let mut b = bag_bytes(5, Some(mcap::Compression::Zstd));
+        let at: Vec<usize> = (0..b.len() - name.len())
+            .filter(|&i| b[i..].starts_with(name))
+            .collect();
+        assert!(!at.is_empty());
+        for i in at {
+            b[i + 4..i + 8].copy_from_slice(b"brot");
+        }
+        let msg = match read_all(&b) {
+            Err(e) => e.to_string(),
+            Ok(items) => match items.into_iter().find_map(Result::err) {
+                Some(e) => e.message,
+                None => panic!("an unknown compression read without error"),
+            },
+        };
+        assert!(
+            msg.contains("\"brot\"") && msg.contains("not supported"),
+            "{msg}"
+        );
+        // Asked for a topic, the answer is the same (not "no topic /scan").
+        let f = tempfile::NamedTempFile::new().unwrap();
+        std::fs::write(f.path(), &b).unwrap();
+        let e = open_bag(f.path(), Some("/scan")).err().unwrap().to_string();
+        assert!(e.contains("\"brot\"") && e.contains("not supported"), "{e}");
     }
 
     #[test]

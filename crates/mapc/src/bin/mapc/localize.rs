@@ -97,7 +97,7 @@ Input formats (--input-format auto decides: an MCAP file by its magic, else by t
           Plain or gzip (.gz); '-' reads stdin (results then flushed one by one).
   carmen  CARMEN logs: FLASER, RLASER, ROBOTLASERk lines (--fov for FLASER/RLASER).
   mcap    ROS 2 bags in rosbag2's MCAP storage: sensor_msgs/msg/LaserScan (CDR) of one
-          topic (--topic when the bag has several); chunks uncompressed or zstd.
+          topic (--topic when the bag has several); chunks uncompressed, zstd or lz4.
 Outputs:
   stdout  --format json: one object per scan (pose, accepted, confidence, covariance,
           hypotheses, candidates, timing; stamp_ns, log_time_ns, frame_id for bag scans;
@@ -194,6 +194,12 @@ pub enum InputKind {
 /// Opens the input the options name: a ROS 2 bag (by `--input-format` or
 /// its magic), else JSON Lines or a CARMEN log (a file or stdin).
 fn scan_source(a: &Args, ui: &Ui) -> Result<Scans, CliError> {
+    if a.input != "-" && scanio::bag::is_sqlite(std::path::Path::new(&a.input)) {
+        return Err(input_err(anyhow::anyhow!(
+            "{} is an SQLite file (a rosbag2 sqlite3 .db3 bag?); mapc reads rosbag2's MCAP storage only: convert it with `ros2 bag convert` or `rosbags-convert --src BAG_DIR --dst OUT_DIR --dst-storage mcap`",
+            a.input
+        )));
+    }
     let (want_bag, fmt) = match a.input_format {
         InputKind::Mcap => (true, InputFormat::Auto),
         InputKind::Auto => (
@@ -298,7 +304,8 @@ fn prior_of(a: &Args) -> Result<Option<refloc::Prior>, CliError> {
 
 /// `mapc localize A.refdb B.refdb ... SCANS`: each scan against every
 /// database; the answer is the accepted localization with the highest
-/// confidence (its map, pose and confidence), or no map when none accepts.
+/// confidence (its map, pose and confidence), or no map when none accepts
+/// (`refloc::select::which_map`, the rule the Python package uses too).
 fn run_maps(a: &Args, ui: &Ui) -> CliResult {
     if a.truth.is_some() || a.mcap.is_some() || a.prior.is_some() || a.prior_heading.is_some() {
         return Err(input_err(anyhow::anyhow!(
@@ -354,10 +361,8 @@ fn run_maps(a: &Args, ui: &Ui) -> CliResult {
             }
         }
         let time_us = t0.elapsed().as_micros() as u64;
-        let best = per_map
-            .iter()
-            .filter(|m| m.1)
-            .max_by(|x, y| x.2.total_cmp(&y.2).then(y.0.cmp(&x.0)));
+        let best =
+            refloc::select::which_map(per_map.iter().map(|m| (m.1, m.2))).map(|i| &per_map[i]);
         match best {
             Some(b) => chosen[b.0] += 1,
             None => none += 1,
