@@ -25,7 +25,8 @@ unset CARGO_TARGET_DIR
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 CAPI=$ROOT/crates/refloc-capi
-GEN=$ROOT/examples/scangen
+# Host tools (examples/scangen and mapc) are members of the root workspace.
+HOST_TARGET=${CARGO_TARGET_DIR:-$ROOT/target}
 OUT=$CAPI/target/capi-test
 CBINDGEN_VERSION=0.29
 UPDATE=0
@@ -44,13 +45,13 @@ command -v "$CC" >/dev/null || die "no C compiler (cc or gcc) found"
 
 # --- 1. inputs -------------------------------------------------------------
 say "building mapc and refloc-scangen (release)"
-cargo build --release -q --manifest-path "$GEN/Cargo.toml" -p refloc-scangen -p mapc --bins
-MAPC=$GEN/target/release/mapc
+cargo build --release -q --manifest-path "$ROOT/Cargo.toml" -p refloc-scangen -p mapc --bins
+MAPC=$HOST_TARGET/release/mapc
 mkdir -p "$OUT"
 say "compiling a map and simulating a scan"
 "$MAPC" -q synth --kind office --width 400 --height 300 --seed 5 -o "$OUT" --name office >/dev/null
 "$MAPC" -q build "$OUT/office.yaml" -o "$OUT/map.refdb" --beams 362
-"$GEN/target/release/refloc-scangen" capi "$OUT/map.refdb" "$OUT/scan.txt" --seed 11 2>"$OUT/host.log" ||
+"$HOST_TARGET/release/refloc-scangen" capi "$OUT/map.refdb" "$OUT/scan.txt" --seed 11 2>"$OUT/host.log" ||
     { cat "$OUT/host.log"; die "scan generation failed"; }
 
 # --- 2. the library --------------------------------------------------------

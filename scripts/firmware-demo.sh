@@ -5,7 +5,7 @@
 #
 # 1. installs what is missing: the thumbv7em-none-eabihf Rust target and
 #    QEMU (Debian package qemu-system-arm, through apt-get);
-# 2. builds mapc and refloc-scangen (examples/scangen, its own target dir);
+# 2. builds mapc and refloc-scangen (examples/scangen, in the root workspace);
 # 3. synthesizes an office map, compiles it to examples/firmware/data/map.refdb
 #    and simulates scans at seeded poses into examples/firmware/data/scans.rs;
 # 4. builds examples/firmware and runs it under QEMU (mps2-an386), which
@@ -25,7 +25,8 @@ unset CARGO_TARGET_DIR
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 FW=$ROOT/examples/firmware
-GEN=$ROOT/examples/scangen
+# Host tools (examples/scangen and mapc) are members of the root workspace.
+HOST_TARGET=${CARGO_TARGET_DIR:-$ROOT/target}
 DATA=$FW/data
 TARGET=thumbv7em-none-eabihf
 ELF=$FW/target/$TARGET/release/refloc-firmware
@@ -59,9 +60,9 @@ fi
 
 # --- 2. host tools ---------------------------------------------------------
 say "building mapc and refloc-scangen (release)"
-cargo build --release -q --manifest-path "$GEN/Cargo.toml" -p refloc-scangen -p mapc --bins
-MAPC=$GEN/target/release/mapc
-SCANGEN=$GEN/target/release/refloc-scangen
+cargo build --release -q --manifest-path "$ROOT/Cargo.toml" -p refloc-scangen -p mapc --bins
+MAPC=$HOST_TARGET/release/mapc
+SCANGEN=$HOST_TARGET/release/refloc-scangen
 
 # --- 3. inputs -------------------------------------------------------------
 say "compiling the map and simulating scans"
