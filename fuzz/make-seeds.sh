@@ -23,7 +23,7 @@ trap 'rm -rf "$work"' EXIT
 
 corpus="$here/corpus"
 rm -rf "$corpus"
-mkdir -p "$corpus"/{refdb,mapfile,scanio}
+mkdir -p "$corpus"/{refdb,mapfile,scanio,bag,cdr}
 
 # --- refdb: small databases, minus the 16-byte prefix the harness supplies.
 "${mapc[@]}" synth --kind office --width 120 --height 90 -o "$work" --name tiny -q
@@ -172,5 +172,92 @@ put("scanio", "carmen", ("\n".join(carmen) + "\n").encode())
 put("scanio", "mixed", b"# header\nhello world\n{\"points\":[[1,2]]}\nFLASER 1 1 0 0 0 0 0 0\n"
     + b"ROBOTLASER2 0 -1.5 3.1 0.5 50 0.01 0 3 1 2 3 0 1 2 3 4 5 6\n")
 put("scanio", "jsonl-gz", gzip.compress(("\n".join(lines[:4]) + "\n").encode(), mtime=0))
+
+# Three scans of the tiny map's 90-beam sensor, for the recording below.
+with open(os.path.join(work, "scans3.jsonl"), "w") as f:
+    for k in range(3):
+        f.write(jl(id=f"r{k}", angle_min=-math.pi, angle_increment=2 * math.pi / n,
+                   range_max=30.0, ranges=[round(v + 0.1 * k, 3) for v in rng]) + "\n")
+
+# --- cdr: sensor_msgs/msg/LaserScan messages (XCDR1), and bag: MCAP files
+# written record by record from the MCAP spec (no mcap library needed).
+def cdr(ranges, intensities=(), little=True, frame="laser", sec=1733270400, nsec=250):
+    e = "<" if little else ">"
+    out = bytearray(b"\x00\x01\x00\x00" if little else b"\x00\x00\x00\x00")
+    def align(k):
+        while (len(out) - 4) % k:
+            out.append(0)
+    def u32(v):
+        align(4)
+        out.extend(struct.pack(e + "I", v))
+    def f32(v):
+        align(4)
+        out.extend(struct.pack(e + "f", v))
+    u32(sec)
+    u32(nsec)
+    u32(len(frame) + 1)
+    out.extend(frame.encode() + b"\x00")
+    for v in (-math.pi, math.pi, 2 * math.pi / max(len(ranges), 1), 0.0, 0.1, 0.05, 30.0):
+        f32(v)
+    for seq in (ranges, intensities):
+        u32(len(seq))
+        for v in seq:
+            f32(v)
+    return bytes(out)
+
+ring = [2.0 + math.sin(3 * k * 2 * math.pi / 24) for k in range(24)]
+put("cdr", "le-intensities", cdr(ring, [100.0] * 24))
+put("cdr", "be", cdr(ring[:10], little=False, frame="base_scan"))
+put("cdr", "inf-nan-empty-frame", cdr([math.inf, math.nan, -1.0, 0.0, 1e30], frame=""))
+put("cdr", "empty-ranges", cdr([]))
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+def s_(t):
+    b = t.encode()
+    return struct.pack("<I", len(b)) + b
+
+def rec(op, body):
+    return struct.pack("<BQ", op, len(body)) + body
+
+def header():
+    return rec(0x01, s_("ros2") + s_("refloc make-seeds"))
+
+def schema(i, name, text):
+    return rec(0x03, struct.pack("<H", i) + s_(name) + s_("ros2msg") + struct.pack("<I", len(text)) + text.encode())
+
+def channel(i, schema_id, topic, encoding="cdr"):
+    meta = s_("offered_qos_profiles") + s_("")
+    return rec(0x04, struct.pack("<HH", i, schema_id) + s_(topic) + s_(encoding) + struct.pack("<I", len(meta)) + meta)
+
+def message(ch, seq, t, data):
+    return rec(0x05, struct.pack("<HIQQ", ch, seq, t, t) + data)
+
+def chunk(records):
+    body = struct.pack("<QQQI", 0, 10**9, len(records), zlib.crc32(records)) + s_("")
+    return rec(0x06, body + struct.pack("<Q", len(records)) + records)
+
+def finish(data):
+    return data + rec(0x0F, struct.pack("<I", 0)) + rec(0x02, struct.pack("<QQI", 0, 0, 0)) + MCAP_MAGIC
+
+LASER = ("std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\n"
+         "float32 time_increment\nfloat32 scan_time\nfloat32 range_min\nfloat32 range_max\n"
+         "float32[] ranges\nfloat32[] intensities\n")
+scans = [cdr(ring, [1.0] * 24), cdr(ring[::2], little=False), cdr(ring)[:30], cdr(ring[:3], nsec=10**9 + 5)]
+base = (schema(1, "sensor_msgs/msg/LaserScan", LASER) + channel(1, 1, "/scan")
+        + schema(2, "std_msgs/msg/String", "string data\n") + channel(2, 2, "/chatter"))
+msgs = b"".join(message(1, k, 100 + k, d) for k, d in enumerate(scans))
+msgs += message(2, 0, 150, b"\x00\x01\x00\x00\x03\x00\x00\x00hi\x00")
+plain = finish(MCAP_MAGIC + header() + base + msgs)
+put("bag", "plain", plain)
+put("bag", "cut", plain[: len(plain) * 3 // 4])
+rear = schema(3, "sensor_msgs/LaserScan", LASER) + channel(3, 3, "/scan_rear")
+put("bag", "chunked-two-scan-topics",
+    finish(MCAP_MAGIC + header() + chunk(base + rear + msgs + message(3, 0, 120, scans[1]))))
+put("bag", "no-scan-topic", finish(MCAP_MAGIC + header() + schema(2, "std_msgs/msg/String", "string data\n")
+                                 + channel(2, 2, "/chatter") + message(2, 0, 1, b"\x00\x01\x00\x00")))
 PY
+# A recording `mapc localize --mcap` writes (zstd chunk, summary section):
+# /scan LaserScans beside the map, pose and TF topics.
+"${mapc[@]}" -q localize "$work/tiny.refdb" "$work/scans3.jsonl" --mcap "$corpus/bag/recording" >/dev/null
 ls -l "$corpus"/*

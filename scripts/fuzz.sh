@@ -4,7 +4,8 @@
 #   scripts/fuzz.sh [SECONDS_PER_TARGET] [TARGET...]   fuzz (default 30 s each, all targets)
 #   scripts/fuzz.sh --replay [TARGET...]               run the committed corpora once (CI)
 #
-# Targets (fuzz/fuzz_targets/): refdb, mapfile, scanio; the harnesses are in
+# Targets (fuzz/fuzz_targets/): refdb, mapfile, scanio, bag (ROS 2 bags, MCAP),
+# cdr (the LaserScan CDR decoder); the harnesses are in
 # fuzz/src/lib.rs. Installs the nightly toolchain and cargo-fuzz if missing.
 #
 # Fuzzing starts from the committed seeds in fuzz/corpus/<target>/ and adds

@@ -201,6 +201,53 @@ fn scanio_seeds_yield_scans() {
     }
 }
 
+#[test]
+fn replay_bag_corpus() {
+    for p in corpus("bag") {
+        replay(&p, harness::bag);
+    }
+}
+
+#[test]
+fn replay_cdr_corpus() {
+    for p in corpus("cdr") {
+        replay(&p, harness::cdr);
+    }
+}
+
+/// Every bag seed but `no-scan-topic` opens with `/scan` chosen by name and
+/// yields scans; the chunked one has two LaserScan topics, so it needs the
+/// name; the cut one ends with the end-of-bag error.
+#[test]
+fn bag_seeds_yield_scans() {
+    use mapc::scanio::bag::{open_bag, BagError};
+    use mapc::scanio::ReadOptions;
+    for p in corpus("bag") {
+        let name = p.file_name().unwrap().to_string_lossy().into_owned();
+        match (name.as_str(), open_bag(&p, None)) {
+            ("no-scan-topic", Err(BagError::NoScanTopic { .. })) => continue,
+            ("chunked-two-scan-topics", Err(BagError::SeveralScanTopics { .. })) => {}
+            (_, Ok(_)) => {}
+            (_, Err(e)) => panic!("{name}: {e}"),
+        }
+        let bag = open_bag(&p, Some(harness::BAG_TOPIC)).unwrap();
+        let items: Vec<_> = bag.scans(&ReadOptions::default()).unwrap().collect();
+        let ok = items.iter().filter(|r| r.is_ok()).count();
+        assert!(ok > 0, "{name}: no scan read");
+        let last_failed = items.last().is_some_and(|r| r.is_err());
+        assert_eq!(last_failed, name == "cut", "{name}: {items:?}");
+    }
+}
+
+/// Every CDR seed decodes.
+#[test]
+fn cdr_seeds_decode() {
+    for p in corpus("cdr") {
+        let m = mapc::scanio::cdr::decode_laser_scan(&read(&p), 1000);
+        assert!(m.is_ok(), "{}: {m:?}", p.display());
+    }
+}
+
 // ---------------------------------------------------------------------------
 // Saved fuzzer findings (minimized with `cargo fuzz tmin`), one test each.
 
@@ -414,5 +461,40 @@ fn scanio_truth_within_one_ulp_replays() {
     replay(
         &finding("scanio", "truth-f64-not-bit-exact"),
         harness::scanio,
+    );
+}
+
+/// `tests/fuzz/bag/header-string-4gib-alloc` (found by the `bag` fuzzer in
+/// its first second, 201 executions): a 256-byte bag whose header record's
+/// profile string claims 4,294,639,620 bytes; the mcap crate reserved that
+/// much before reading the string (libFuzzer: `malloc(4294639620)`). Fixed
+/// by `check_string_lengths` in `mapc::scanio::bag`: an error naming the
+/// record, checked before the record is parsed.
+#[test]
+fn bag_string_longer_than_its_record_is_not_allocated() {
+    replay(&finding("bag", "header-string-4gib-alloc"), harness::bag);
+    let e = mapc::scanio::bag::open_bag(&finding("bag", "header-string-4gib-alloc"), None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("header record: a string at byte 0 claims"),
+        "{e}"
+    );
+}
+
+/// `tests/fuzz/bag/second-scan-channel-of-another-type` (found by the `bag`
+/// fuzzer after 575,467 executions, 573 s): the `recording` seed with a
+/// second `/scan` channel whose schema and encoding are not LaserScan /
+/// `cdr`. It broke the harness's invariant on the chosen topic (which
+/// assumed one channel per name) and showed that `Bag::scans` read the
+/// messages of every channel named `/scan` as LaserScans. Fixed: only the
+/// topic's LaserScan (`cdr`) channels are read
+/// (`scanio::bag::tests::only_the_laser_scan_channels_of_the_topic_are_read`),
+/// and the invariant asks for one such channel among those of the name.
+#[test]
+fn bag_other_channel_of_the_scan_topic_replays() {
+    replay(
+        &finding("bag", "second-scan-channel-of-another-type"),
+        harness::bag,
     );
 }

@@ -655,6 +655,52 @@ fn unbounded_cases_stay_bounded_under_memory_and_cpu_limits() {
 
 #[cfg(unix)]
 #[test]
+fn huge_yaml_resolutions_are_refused_by_database_size_under_a_memory_limit() {
+    let (dir, before) = dir_with_good_db();
+    copy_room(dir.path());
+    // At 100 m (or 10^6 m) per cell the site spacing and the coverage
+    // range are far below a cell, so almost every free cell of the demo
+    // map becomes a site (3.5 GB, and past 4 GB, before): refused once the
+    // sites are placed, before their scans and histograms exist.
+    for res in ["100", "1e6"] {
+        let yaml = format!("res-{res}.yaml");
+        std::fs::write(
+            dir.path().join(&yaml),
+            format!(
+                "image: room.pgm\nresolution: {res}\norigin: [0.0, 0.0, 0.0]\nnegate: 0\n\
+                 occupied_thresh: 0.65\nfree_thresh: 0.196\n"
+            ),
+        )
+        .unwrap();
+        let o = bounded_mapc()
+            .current_dir(dir.path())
+            .args(["build", &yaml, "-o", "good.refdb", "--fit-queries", "0"])
+            .output()
+            .unwrap();
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(2), "{res}: {t}");
+        assert!(t.contains("reference sites of"), "{t}");
+        assert!(
+            t.contains("the limit is 1073741824 bytes (--max-db-bytes raises it)"),
+            "{t}"
+        );
+        assert_eq!(
+            std::fs::read(dir.path().join("good.refdb")).unwrap(),
+            before
+        );
+    }
+    // Zero is a usage error.
+    let o = build_room(mapc(), dir.path(), "zero.refdb", &["--max-db-bytes", "0"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("--max-db-bytes"), "{}", text(&o));
+    assert_eq!(
+        names_in(dir.path()),
+        ["good.refdb", "res-100.yaml", "res-1e6.yaml", "room.pgm"]
+    );
+}
+
+#[cfg(unix)]
+#[test]
 fn a_build_removes_stale_temporary_files_of_its_output_and_nothing_else() {
     use std::os::unix::io::AsRawFd;
     let (dir, _) = dir_with_good_db();

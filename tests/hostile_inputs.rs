@@ -426,18 +426,7 @@ fn extreme_finite_values_give_a_pose_or_a_typed_error() {
 /// The map a test image describes, as `mapc build` would load it.
 fn grid_map(rows: &[String]) -> MapSource {
     let refs: Vec<&str> = rows.iter().map(String::as_str).collect();
-    let grid = OccupancyGrid::from_ascii(&refs, 0.05, [0.0; 3]);
-    MapSource {
-        grid,
-        yaml_path: None,
-        image_path: "test.pgm".into(),
-        yaml_sha256: None,
-        image_sha256: [0; 32],
-        negate: false,
-        occupied_thresh: mapfile::DEFAULT_OCCUPIED_THRESH,
-        free_thresh: mapfile::DEFAULT_FREE_THRESH,
-        mode: mapfile::Mode::Trinary,
-    }
+    MapSource::in_memory(OccupancyGrid::from_ascii(&refs, 0.05, [0.0; 3]), "test.pgm")
 }
 
 /// `w x h` rows, `cell(x, y)` with y = 0 the top row.

@@ -15,8 +15,11 @@
 use std::cell::RefCell;
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Once};
 
 use mapc::mapfile::{load_image, load_yaml};
+use mapc::scanio::bag::open_bag_bytes;
+use mapc::scanio::cdr::{decode_laser_scan, LaserScanMsg, Writer as CdrWriter};
 use mapc::scanio::{open_input, read_scans, scan_to_json, InputFormat, ReadOptions, ScanData};
 use refloc::format::{
     header_crc, Header, ENDIAN_CHECK, ENTRY_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, MAX_SECTIONS,
@@ -527,4 +530,139 @@ fn check_round_trip(d: &ScanData, id: &str, truth: Option<[f64; 3]>) {
         }
         _ => panic!("scan kind changed in the round trip\n{json}"),
     }
+}
+
+// ---------------------------------------------------------------------------
+// bag and cdr
+
+/// The topic the `bag` harness also asks for by name (the one rosbag2 and
+/// the seeds use).
+pub const BAG_TOPIC: &str = "/scan";
+
+/// Installs, once, a panic hook that stays silent for panics raised inside
+/// the `mcap` crate and hands every other panic to the hook before it
+/// (libFuzzer's, which aborts). The bag reader runs the mcap reader under
+/// `catch_unwind` and turns its panics (arithmetic overflow on a crafted
+/// chunk, with debug assertions) into an error, by design
+/// (`RecordStream::next` in `mapc::scanio::bag`); libFuzzer's hook would
+/// abort on them before they are caught. A panic anywhere else, the CDR
+/// decoder and the reader's own code included, still counts.
+fn let_the_bag_reader_catch_mcap_panics() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        let before = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            let in_mcap = info
+                .location()
+                .is_some_and(|l| l.file().replace('\\', "/").contains("/mcap-"));
+            if !in_mcap {
+                before(info);
+            }
+        }));
+    });
+}
+
+/// The `bag` target: `data` as an MCAP file in memory, through
+/// `open_bag_bytes` (any LaserScan topic, and `/scan` by name), then every
+/// item of `Bag::scans` with the default and the small read options.
+pub fn bag(data: &[u8]) {
+    let_the_bag_reader_catch_mcap_panics();
+    let bytes: Arc<[u8]> = data.into();
+    for topic in [None, Some(BAG_TOPIC)] {
+        let bag = match open_bag_bytes(Arc::clone(&bytes), Path::new("fuzz.mcap"), topic) {
+            Ok(b) => b,
+            Err(e) => {
+                assert!(!e.to_string().is_empty(), "empty bag error");
+                continue;
+            }
+        };
+        // invariant: the chosen topic is one of the bag's, with a LaserScan
+        // channel (a bag may have other channels of the same name).
+        let mut chosen = bag.topics.iter().filter(|t| t.topic == bag.topic);
+        assert!(
+            chosen.any(|t| t.schema.ends_with("LaserScan") && t.encoding == "cdr"),
+            "chose {} of {:?}",
+            bag.topic,
+            bag.topics
+        );
+        if let Some(want) = topic {
+            assert_eq!(bag.topic, want, "asked for {want}");
+        }
+        for opts in [ReadOptions::default(), small_read_options()] {
+            let items = bag.scans(&opts).expect("scans from memory");
+            let mut ended = false;
+            for (k, item) in items.enumerate() {
+                // invariants: one item per message of the topic, numbered
+                // from 1 (`msg K` on line K + 1); a broken bag ends the
+                // stream with one more error.
+                assert!(!ended, "an item after the end-of-bag error");
+                match item {
+                    Ok(scan) => {
+                        check_scan(&scan.data, &opts);
+                        assert!(scan.stamp.is_some(), "a bag scan without its stamp");
+                        assert_eq!((scan.line, scan.id), (k + 1, format!("msg {k}")));
+                    }
+                    Err(e) => {
+                        assert!(!e.message.is_empty(), "empty scan error");
+                        assert_eq!(e.line, k + 1, "{}", e.message);
+                        ended = e.message.starts_with("bag ends early or is damaged");
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The `cdr` target: `data` as one CDR `sensor_msgs/msg/LaserScan` (the
+/// payload of a bag message), decoded with room for 1,000,000 beams and
+/// for 24; a decoded message must encode (little-endian) and decode again
+/// to the same bits.
+pub fn cdr(data: &[u8]) {
+    for max_beams in [1_000_000, 24] {
+        let Ok(m) = decode_laser_scan(data, max_beams) else {
+            continue;
+        };
+        // invariant: the sequences are bounded by max_beams.
+        assert!(m.ranges.len() <= max_beams && m.intensities.len() <= max_beams);
+        let again = decode_laser_scan(&encode_laser_scan(&m), max_beams)
+            .unwrap_or_else(|e| panic!("a decoded LaserScan does not decode again: {e}"));
+        assert_eq!(bits_of(&again), bits_of(&m), "CDR round trip");
+        assert_eq!(again.frame_id, m.frame_id, "frame_id round trip");
+    }
+}
+
+/// The seven `float32` fields of `m` between the header and the ranges,
+/// in message order.
+fn scalars(m: &LaserScanMsg) -> [f32; 7] {
+    [
+        m.angle_min,
+        m.angle_max,
+        m.angle_increment,
+        m.time_increment,
+        m.scan_time,
+        m.range_min,
+        m.range_max,
+    ]
+}
+
+/// `m` in little-endian CDR, field by field.
+fn encode_laser_scan(m: &LaserScanMsg) -> Vec<u8> {
+    let mut w = CdrWriter::new();
+    w.i32(m.stamp_sec).u32(m.stamp_nanosec).string(&m.frame_id);
+    for v in scalars(m) {
+        w.f32(v);
+    }
+    w.f32_seq(&m.ranges).f32_seq(&m.intensities);
+    w.into_bytes()
+}
+
+/// Every number of `m` as bits (NaN payloads included).
+fn bits_of(m: &LaserScanMsg) -> Vec<u32> {
+    let mut v = vec![m.stamp_sec as u32, m.stamp_nanosec];
+    v.extend(scalars(m).iter().map(|x| x.to_bits()));
+    v.push(m.ranges.len() as u32);
+    v.extend(m.ranges.iter().map(|x| x.to_bits()));
+    v.push(m.intensities.len() as u32);
+    v.extend(m.intensities.iter().map(|x| x.to_bits()));
+    v
 }

@@ -78,6 +78,62 @@ pub fn ref_lidar(params: &Params) -> Lidar {
     }
 }
 
+/// Default largest database a build may write, in bytes (`mapc build
+/// --max-db-bytes`, [`crate::pipeline::BuildConfig::max_db_bytes`]): 1 GiB,
+/// over 100 times the largest shared map's (willow-2010: 536 sites, 9 MB),
+/// and the size of the 8000 x 8000 synthetic office of `docs/scaling.md`
+/// (34,609 sites, 648 MiB) with room to spare; its 16000 x 16000 office
+/// (140,415 sites, 2.6 GiB) needs a higher limit. A build's peak memory is
+/// a little above its database's size.
+pub const DEFAULT_MAX_DB_BYTES: u64 = 1 << 30;
+
+/// The size of the database sections that grow with the map and its sites,
+/// known once the sites are placed and before any per-site data exists (see
+/// [`db_size`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DbSize {
+    /// Reference sites.
+    pub sites: u64,
+    /// Bytes each site adds: its reference scan, PGR histogram, window
+    /// histograms and site record.
+    pub per_site: u64,
+    /// All of it: the sites' bytes and their neighbour lists, the grid,
+    /// the distance map and the fixed records (meta, params, decision)
+    /// (bytes; saturating). The coarse-search index, the manifest and the
+    /// container's header and padding come on top.
+    pub total: u64,
+}
+
+/// The size of a database of `sites` sites with `neighbours` neighbour
+/// links in all (the sum of their lists' lengths) on a `width` x `height`
+/// grid, compiled with `params`: the bytes of every section of a
+/// [`crate::pipeline::build`] but the index and the manifest.
+pub fn db_size(params: &Params, width: u32, height: u32, sites: usize, neighbours: u64) -> DbSize {
+    let floats = params.sensor.beams as u64
+        + params.hist_cells() as u64
+        + (params.win_count() as u64)
+            .saturating_mul(params.win_headings as u64)
+            .saturating_mul(params.win_cells() as u64);
+    let per_site = floats
+        .saturating_mul(4)
+        .saturating_add(std::mem::size_of::<SiteRecord>() as u64);
+    let cells = width as u64 * height as u64;
+    let fixed = (std::mem::size_of::<MetaRecord>()
+        + std::mem::size_of::<refloc::format::ParamsRecord>()
+        + std::mem::size_of::<refloc::format::DecisionRecord>()) as u64;
+    let total = per_site
+        .saturating_mul(sites as u64)
+        .saturating_add(neighbours.saturating_mul(4))
+        .saturating_add(BitGrid::words_for(width, height) as u64 * 4)
+        .saturating_add(cells)
+        .saturating_add(fixed);
+    DbSize {
+        sites: sites as u64,
+        per_site,
+        total,
+    }
+}
+
 /// Reference scan ranges of every site (m; `INFINITY` for no return). The
 /// sensor sits on the site, heading along the map's +x axis.
 pub fn reference_scans(

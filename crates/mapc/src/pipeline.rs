@@ -77,6 +77,13 @@ pub struct BuildConfig {
     /// The coarse-search index (built for maps with at least
     /// `index.min_sites` sites; its seed is replaced by `seed`).
     pub index: crate::index::IndexOptions,
+    /// Largest database the build may write (bytes, [`compile::db_size`]:
+    /// every section but the coarse-search index and the manifest),
+    /// checked once the sites are placed, before any per-site data is
+    /// computed. A bound, not an option of the result: it is not stored in
+    /// the manifest.
+    #[serde(skip)]
+    pub max_db_bytes: u64,
 }
 
 impl Default for BuildConfig {
@@ -108,6 +115,7 @@ impl Default for BuildConfig {
             occlusion_fit: Params::defaults(362, 30.0).occlusion_fit,
             accept_confidence: refloc::Decision::DEFAULT.threshold,
             index: crate::index::IndexOptions::default(),
+            max_db_bytes: compile::DEFAULT_MAX_DB_BYTES,
         }
     }
 }
@@ -274,6 +282,35 @@ fn hex(b: &[u8]) -> String {
     b.iter().map(|x| format!("{x:02x}")).collect()
 }
 
+/// Refuses a build whose database would exceed `max_db_bytes` (see
+/// [`compile::db_size`]), saying how large it would be and why: a map with
+/// a resolution far from its scale (say 100 m per cell) makes a site of
+/// almost every free cell, some 16 KB each.
+fn check_db_size(
+    src: &MapSource,
+    params: &Params,
+    sites: &[sites::SitePlacement],
+    max_db_bytes: u64,
+) -> Result<(), String> {
+    let grid = &src.grid;
+    let links = sites.iter().map(|s| s.neighbours.len() as u64).sum();
+    let size = compile::db_size(params, grid.width, grid.height, sites.len(), links);
+    if size.total <= max_db_bytes {
+        return Ok(());
+    }
+    Err(format!(
+        "the database would take at least {} bytes: {} reference sites of {} bytes each \
+         (for {} free cells at {} m per cell) plus the grid and distance map; the limit is {} \
+         bytes (--max-db-bytes raises it)",
+        size.total,
+        size.sites,
+        size.per_site,
+        grid.free_count(),
+        grid.resolution,
+        max_db_bytes
+    ))
+}
+
 /// Builds the database sections of `src` with `cfg`. Deterministic: the
 /// same inputs and options give identical bytes whatever the thread count.
 pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> {
@@ -307,6 +344,7 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> 
         refloc::raycast::BitGrid::new(grid.width, grid.height, &blocked).ok_or("grid too large")?;
     let placed = sites::place_sites(grid, &df, &graph, &sopts);
     laps.lap("sites.place");
+    check_db_size(src, &params, &placed, cfg.max_db_bytes)?;
     let coverage = sites::coverage(grid, &bitgrid, &df, &placed, 0.25, cfg.coverage_range);
     times.sites = t.elapsed().as_secs_f64();
     laps.lap("sites.coverage");
@@ -415,3 +453,6 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> 
 pub fn sha256_hex(bytes: &[u8]) -> String {
     hex(&sha2::Sha256::digest(bytes))
 }
+
+#[cfg(test)]
+mod tests;

@@ -282,6 +282,23 @@ pub struct MapSource {
 }
 
 impl MapSource {
+    /// A map made in memory rather than read (tests, generated grids): no
+    /// YAML, the map_saver's thresholds, trinary mode, and `image` as the
+    /// image's name (no such file need exist; its hash is zero).
+    pub fn in_memory(grid: OccupancyGrid, image: &str) -> Self {
+        MapSource {
+            grid,
+            yaml_path: None,
+            image_path: image.into(),
+            yaml_sha256: None,
+            image_sha256: [0; 32],
+            negate: false,
+            occupied_thresh: DEFAULT_OCCUPIED_THRESH,
+            free_thresh: DEFAULT_FREE_THRESH,
+            mode: Mode::Trinary,
+        }
+    }
+
     /// The files the map was read from (the image, and the YAML when there
     /// is one): an output must never be one of them
     /// ([`crate::writer::check_output_path`]).

@@ -4,13 +4,14 @@
 //! [`open_bag`] reads the file once to list its channels (and finds a cut-off
 //! end there), picks the LaserScan topic, then [`Bag::scans`] reads it again,
 //! streaming, and decodes each message with the bounded CDR decoder of
-//! [`super::cdr`]. Memory is bounded by [`MAX_RECORD_BYTES`] per record (a
+//! [`super::cdr`]. [`open_bag_bytes`] does the same for a bag in memory. Memory is bounded by [`MAX_RECORD_BYTES`] per record (a
 //! chunk's declared sizes included), never by a count written in the file.
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{self, Read};
+use std::io::{self, Cursor, Read};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use mcap::records::Record;
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
@@ -128,10 +129,34 @@ fn list(topics: &[BagTopic]) -> String {
         .join(", ")
 }
 
+/// Where a bag's bytes are: a file, read again for each pass, or memory.
+enum BagData {
+    File(PathBuf),
+    Bytes(Arc<[u8]>),
+}
+
+impl std::fmt::Debug for BagData {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            BagData::File(p) => write!(f, "File({})", p.display()),
+            BagData::Bytes(b) => write!(f, "Bytes({} bytes)", b.len()),
+        }
+    }
+}
+
+impl BagData {
+    fn stream(&self) -> io::Result<RecordStream> {
+        Ok(RecordStream::new(match self {
+            BagData::File(path) => Box::new(File::open(path)?),
+            BagData::Bytes(b) => Box::new(Cursor::new(Arc::clone(b))),
+        }))
+    }
+}
+
 /// An opened bag and its chosen LaserScan topic.
 #[derive(Debug)]
 pub struct Bag {
-    path: PathBuf,
+    data: BagData,
     /// Every channel, by topic name.
     pub topics: Vec<BagTopic>,
     /// The topic whose scans [`Bag::scans`] yields.
@@ -166,21 +191,46 @@ fn starts_with<const N: usize>(path: &Path, magic: &[u8; N]) -> bool {
 /// Opens a bag, lists its channels and picks the LaserScan topic: `topic`
 /// if given, else the only LaserScan channel.
 pub fn open_bag(path: &Path, topic: Option<&str>) -> Result<Bag, BagError> {
-    let io_err = |source| BagError::Io {
-        path: path.to_owned(),
-        source,
-    };
     if !is_mcap(path) {
         // Say why: a missing or unreadable file, or another format.
-        File::open(path).map_err(io_err)?;
+        File::open(path).map_err(|source| BagError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
         return Err(BagError::NotMcap {
             path: path.to_owned(),
         });
     }
+    choose_topic(BagData::File(path.to_owned()), path, topic)
+}
+
+/// As [`open_bag`], for a bag held in memory; `name` stands for its path
+/// in errors. [`Bag::scans`] then reads the same bytes.
+pub fn open_bag_bytes(
+    bytes: impl Into<Arc<[u8]>>,
+    name: &Path,
+    topic: Option<&str>,
+) -> Result<Bag, BagError> {
+    let bytes = bytes.into();
+    if !bytes.starts_with(MAGIC) {
+        return Err(BagError::NotMcap {
+            path: name.to_owned(),
+        });
+    }
+    choose_topic(BagData::Bytes(bytes), name, topic)
+}
+
+/// The first pass of [`open_bag`] and [`open_bag_bytes`]: lists the
+/// channels of the bag in `data` and picks the topic.
+fn choose_topic(data: BagData, path: &Path, topic: Option<&str>) -> Result<Bag, BagError> {
+    let io_err = |source| BagError::Io {
+        path: path.to_owned(),
+        source,
+    };
     let mut channels: BTreeMap<u16, (String, u16, String)> = BTreeMap::new();
     let mut schemas: BTreeMap<u16, String> = BTreeMap::new();
     let mut counts: BTreeMap<u16, u64> = BTreeMap::new();
-    let mut stream = RecordStream::open(path).map_err(io_err)?;
+    let mut stream = data.stream().map_err(io_err)?;
     let mut damage = None;
     loop {
         let step = stream.next(|rec| match rec {
@@ -264,7 +314,7 @@ pub fn open_bag(path: &Path, topic: Option<&str>) -> Result<Bag, BagError> {
         },
     };
     Ok(Bag {
-        path: path.to_owned(),
+        data,
         topics,
         topic: chosen,
         damage,
@@ -281,9 +331,10 @@ impl Bag {
         opts: &ReadOptions,
     ) -> io::Result<impl Iterator<Item = Result<InputScan, ScanError>>> {
         Ok(BagScans {
-            stream: RecordStream::open(&self.path)?,
+            stream: self.data.stream()?,
             topic: self.topic.clone(),
             ids: Vec::new(),
+            schemas: BTreeMap::new(),
             opts: *opts,
             k: 0,
             done: false,
@@ -294,8 +345,10 @@ impl Bag {
 struct BagScans {
     stream: RecordStream,
     topic: String,
-    /// Channel ids of the chosen topic.
+    /// Channel ids of the chosen topic that carry LaserScans (CDR).
     ids: Vec<u16>,
+    /// Schema ids seen so far, and whether each is a LaserScan.
+    schemas: BTreeMap<u16, bool>,
     opts: ReadOptions,
     /// Messages of the topic seen so far.
     k: usize,
@@ -308,9 +361,27 @@ impl Iterator for BagScans {
     fn next(&mut self) -> Option<Self::Item> {
         while !self.done {
             let mut out = None;
-            let (ids, topic, k, opts) = (&mut self.ids, &self.topic, &mut self.k, &self.opts);
+            let (ids, schemas, topic, k, opts) = (
+                &mut self.ids,
+                &mut self.schemas,
+                &self.topic,
+                &mut self.k,
+                &self.opts,
+            );
             let step = self.stream.next(|rec| match rec {
-                Record::Channel(c) if &c.topic == topic => ids.push(c.id),
+                Record::Schema { header, .. } => {
+                    schemas.insert(header.id, is_laser_scan(&header.name));
+                }
+                // Only the topic's LaserScan channels: a bag may hold another
+                // channel of the same name with another type (found by the
+                // `bag` fuzz target), whose messages are not LaserScans.
+                Record::Channel(c)
+                    if &c.topic == topic
+                        && c.message_encoding == "cdr"
+                        && schemas.get(&c.schema_id) == Some(&true) =>
+                {
+                    ids.push(c.id)
+                }
                 Record::Message { header, data } if ids.contains(&header.channel_id) => {
                     out = Some(to_scan(&data, *k, header.log_time, opts));
                     *k += 1;
@@ -413,9 +484,10 @@ enum StreamError {
     Mcap(String),
 }
 
-/// MCAP records from a file, streaming, bounded by [`MAX_RECORD_BYTES`].
+/// MCAP records from a file (or bytes), streaming, bounded by
+/// [`MAX_RECORD_BYTES`].
 struct RecordStream {
-    file: File,
+    file: Box<dyn Read + Send>,
     reader: LinearReader,
     /// Bytes read from the file so far.
     bytes: u64,
@@ -426,9 +498,9 @@ struct RecordStream {
 const BROKEN: &str = "malformed MCAP records (the mcap reader gave up on them)";
 
 impl RecordStream {
-    fn open(path: &Path) -> io::Result<RecordStream> {
-        Ok(RecordStream {
-            file: File::open(path)?,
+    fn new(file: Box<dyn Read + Send>) -> RecordStream {
+        RecordStream {
+            file,
             reader: LinearReader::new_with_options(
                 LinearReaderOptions::default()
                     .with_record_length_limit(MAX_RECORD_BYTES)
@@ -436,7 +508,7 @@ impl RecordStream {
             ),
             bytes: 0,
             broken: false,
-        })
+        }
     }
 
     /// Hands the next record to `f`: `Ok(true)` after a record, `Ok(false)`
@@ -477,6 +549,7 @@ impl RecordStream {
                     self.reader.notify_read(n);
                 }
                 Some(Ok(LinearReadEvent::Record { opcode, data })) => {
+                    check_string_lengths(opcode, data).map_err(StreamError::Mcap)?;
                     let rec = mcap::parse_record(opcode, data)
                         .map_err(|e| StreamError::Mcap(mcap_message(&e)))?;
                     f(rec);
@@ -485,6 +558,96 @@ impl RecordStream {
             }
         }
     }
+}
+
+/// A field of an MCAP record, for [`check_string_lengths`].
+#[derive(Clone, Copy)]
+enum Field {
+    /// `n` bytes of fixed-size fields.
+    Fixed(usize),
+    /// A `string`: u32 length, then that many bytes.
+    Str,
+    /// A `map<string, string>`: u32 length in bytes, then key and value
+    /// strings.
+    StrMap,
+    /// A u32 length in bytes, then entries of fixed size (an array or a
+    /// map of integers).
+    Sized,
+}
+
+/// The fields of each record kind (MCAP spec) up to its last string; a
+/// record without strings (message, footer, ...) has none.
+fn string_fields(opcode: u8) -> (&'static str, &'static [Field]) {
+    use Field::*;
+    match opcode {
+        0x01 => ("header", &[Str, Str]),
+        0x03 => ("schema", &[Fixed(2), Str, Str]),
+        0x04 => ("channel", &[Fixed(4), Str, Str, StrMap]),
+        0x06 => ("chunk", &[Fixed(28), Str]),
+        0x08 => ("chunk index", &[Fixed(32), Sized, Fixed(8), Str]),
+        0x09 => ("attachment", &[Fixed(16), Str, Str]),
+        0x0a => ("attachment index", &[Fixed(40), Str, Str]),
+        0x0c => ("metadata", &[Str, StrMap]),
+        0x0d => ("metadata index", &[Fixed(16), Str]),
+        _ => ("", &[]),
+    }
+}
+
+/// Refuses a record with a string longer than the bytes left in it. The
+/// mcap crate reserves a string's declared length before it reads the
+/// string (up to 4 GiB for a record of a few bytes: found by the `bag`
+/// fuzz target); other length errors it reports itself, without allocating.
+fn check_string_lengths(opcode: u8, data: &[u8]) -> Result<(), String> {
+    let (name, fields) = string_fields(opcode);
+    let len_at = |at: usize| -> Option<usize> {
+        let b = data.get(at..at.checked_add(4)?)?;
+        Some(u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
+    };
+    // A string at `at`: the offset after it; `None` when its length does
+    // not fit (the mcap crate reports that).
+    let string = |at: usize| -> Result<Option<usize>, String> {
+        let Some(len) = len_at(at) else {
+            return Ok(None);
+        };
+        let left = data.len() - (at + 4);
+        if len > left {
+            return Err(format!(
+                "{name} record: a string at byte {at} claims {len} bytes, {left} are left in the record"
+            ));
+        }
+        Ok(Some(at + 4 + len))
+    };
+    let mut at = 0usize;
+    for &f in fields {
+        let next = match f {
+            Field::Fixed(n) => Some(at + n).filter(|&e| e <= data.len()),
+            Field::Str => string(at)?,
+            Field::Sized => len_at(at)
+                .map(|len| at + 4 + len)
+                .filter(|&e| e <= data.len()),
+            Field::StrMap => {
+                let Some(bytes) = len_at(at) else {
+                    return Ok(());
+                };
+                // As the mcap crate reads it: entries until the map's
+                // length is used up, each string within the record.
+                let start = at + 4;
+                let mut p = Some(start);
+                while let Some(q) = p.filter(|&q| q - start < bytes) {
+                    p = match string(q)? {
+                        Some(r) => string(r)?,
+                        None => None,
+                    };
+                }
+                p
+            }
+        };
+        match next {
+            Some(n) => at = n,
+            None => return Ok(()),
+        }
+    }
+    Ok(())
 }
 
 fn mcap_message(e: &mcap::McapError) -> String {
@@ -540,11 +703,18 @@ mod tests {
         out.into_inner()
     }
 
+    /// Every item of the bag `bytes` read from a file; reading the same
+    /// bytes from memory must give the same items and errors.
     fn read_all(bytes: &[u8]) -> Result<Vec<Result<InputScan, ScanError>>, BagError> {
         let f = tempfile::NamedTempFile::new().unwrap();
         std::fs::write(f.path(), bytes).unwrap();
-        let bag = open_bag(f.path(), None)?;
-        Ok(bag.scans(&ReadOptions::default()).unwrap().collect())
+        let read = |bag: Result<Bag, BagError>| -> Result<Vec<_>, BagError> {
+            Ok(bag?.scans(&ReadOptions::default()).unwrap().collect())
+        };
+        let from_file = read(open_bag(f.path(), None));
+        let from_bytes = read(open_bag_bytes(bytes, f.path(), None));
+        assert_eq!(format!("{from_file:?}"), format!("{from_bytes:?}"));
+        from_file
     }
 
     #[test]
@@ -561,6 +731,52 @@ mod tests {
             assert_eq!(s.stamp.as_ref().unwrap().ns, 7000);
             assert_eq!(s.data.len(), 5);
         }
+    }
+
+    /// Another channel named /scan with another type (found by the `bag`
+    /// fuzz target): its messages are not read as LaserScans.
+    #[test]
+    fn only_the_laser_scan_channels_of_the_topic_are_read() {
+        let mut out = io::Cursor::new(Vec::new());
+        let mut w = mcap::WriteOptions::new()
+            .compression(None)
+            .create(&mut out)
+            .unwrap();
+        let laser = w
+            .add_schema("sensor_msgs/msg/LaserScan", "ros2msg", b"")
+            .unwrap();
+        let text = w.add_schema("std_msgs/msg/String", "ros2msg", b"").unwrap();
+        let scan = w
+            .add_channel(laser, "/scan", "cdr", &BTreeMap::new())
+            .unwrap();
+        let other = w
+            .add_channel(text, "/scan", "cdr", &BTreeMap::new())
+            .unwrap();
+        let mut m = super::super::cdr::Writer::new();
+        m.header(5, "laser");
+        for v in [-1.0, 1.0, 0.5, 0.0, 0.1, 0.0, 10.0] {
+            m.f32(v);
+        }
+        m.f32_seq(&[1.0, 2.0, 3.0]).f32_seq(&[]);
+        let scan_msg = m.into_bytes();
+        let text_msg = b"\x00\x01\x00\x00\x03\x00\x00\x00hi\x00".to_vec();
+        for (k, (channel_id, data)) in [(other, &text_msg), (scan, &scan_msg), (other, &text_msg)]
+            .into_iter()
+            .enumerate()
+        {
+            let header = mcap::records::MessageHeader {
+                channel_id,
+                sequence: k as u32,
+                log_time: k as u64,
+                publish_time: k as u64,
+            };
+            w.write_to_known_channel(&header, data).unwrap();
+        }
+        w.finish().unwrap();
+        drop(w);
+        let got = read_all(&out.into_inner()).unwrap();
+        assert_eq!(got.len(), 1, "{got:?}");
+        assert_eq!(got[0].as_ref().unwrap().data.len(), 3);
     }
 
     #[test]
@@ -607,6 +823,58 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The `bag` fuzz target's first finding (`tests/fuzz/bag/`): a header
+    /// record whose profile string claims 4,294,639,620 bytes made the mcap
+    /// crate reserve 4 GiB for a 256-byte file.
+    #[test]
+    fn a_string_longer_than_its_record_is_an_error_not_an_allocation() {
+        let mut b = MAGIC.to_vec();
+        b.push(0x01);
+        b.extend_from_slice(&12u64.to_le_bytes());
+        b.extend_from_slice(&0xfffb_0004u32.to_le_bytes());
+        b.extend_from_slice(b"ros2\0\0\0\0");
+        b.extend_from_slice(MAGIC);
+        match read_all(&b) {
+            Err(BagError::Mcap { what, .. }) => assert!(
+                what.starts_with(
+                    "header record: a string at byte 0 claims 4294639620 bytes, 8 are left in the record"
+                ),
+                "{what}"
+            ),
+            other => panic!("{other:?}"),
+        }
+        // Every string field of every record kind is checked, in maps too.
+        assert!(check_string_lengths(0x04, &[0, 0, 0, 0, 2, 0, 0, 0, b'/', b's']).is_ok());
+        // A channel whose metadata key overruns the record, a chunk index
+        // whose compression name does.
+        let cases: [(u8, Vec<u8>, &str); 2] = [
+            (
+                0x04,
+                [&[0u8; 12][..], &[8, 0, 0, 0, 9, 0, 0, 0], b"abcd"].concat(),
+                "channel record: a string at byte 16 claims 9 bytes, 4",
+            ),
+            (
+                0x08,
+                [
+                    &[0u8; 32][..],
+                    &[2, 0, 0, 0],
+                    &[0; 10],
+                    &[5, 0, 0, 0],
+                    b"zstd",
+                ]
+                .concat(),
+                "chunk index record: a string at byte 46",
+            ),
+        ];
+        for (opcode, record, says) in cases {
+            let e = check_string_lengths(opcode, &record).unwrap_err();
+            assert!(e.starts_with(says), "{e}");
+        }
+        // A valid bag passes unchanged (reads_plain_and_zstd_bags), and a
+        // record too short for its fixed fields is left to the mcap crate.
+        assert!(check_string_lengths(0x08, &[0; 10]).is_ok());
     }
 
     #[test]

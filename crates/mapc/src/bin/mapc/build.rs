@@ -149,6 +149,25 @@ pub struct BuildOpts {
     /// Coarse-search index: a tree node with at most this many sites (or site headings) is a leaf.
     #[arg(long, value_name = "ENTRIES", default_value_t = mapc::index::IndexOptions::default().leaf_size)]
     pub index_leaf_size: usize,
+    #[command(flatten)]
+    pub db_limit: DbLimitArgs,
+}
+
+/// The database-size limit of every command that compiles a map.
+#[derive(clap::Args, Debug, Clone)]
+pub struct DbLimitArgs {
+    /// Largest database written, in bytes: the reference sites' data (about
+    /// 16 KB per site with the default sensor and windows), the grid and the
+    /// distance map, checked once the sites are placed and before their
+    /// scans and histograms are computed [default: 1073741824 = 1 GiB].
+    #[arg(
+        long,
+        value_name = "BYTES",
+        default_value_t = mapc::compile::DEFAULT_MAX_DB_BYTES,
+        hide_default_value = true,
+        value_parser = clap::value_parser!(u64).range(1..)
+    )]
+    pub max_db_bytes: u64,
 }
 
 impl BuildOpts {
@@ -189,6 +208,7 @@ impl BuildOpts {
                 leaf_size: self.index_leaf_size,
                 ..d.index.clone()
             },
+            max_db_bytes: self.db_limit.max_db_bytes,
             fov_windows_deg: if self.fov_windows.trim() == "none" {
                 Vec::new()
             } else {

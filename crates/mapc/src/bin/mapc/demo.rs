@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use mapc::pipeline;
 
-use crate::build::{load_map, BuildOpts, MapLimitArgs};
+use crate::build::{load_map, BuildOpts, DbLimitArgs, MapLimitArgs};
 use crate::util::outln;
 use crate::util::{fail_err, input_err, CliResult, Ui};
 
@@ -31,6 +31,8 @@ pub struct Args {
     pub seed: u64,
     #[command(flatten)]
     pub limits: MapLimitArgs,
+    #[command(flatten)]
+    pub db_limit: DbLimitArgs,
 }
 
 pub fn run(a: Args, ui: &Ui) -> CliResult {
@@ -73,6 +75,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         index_beam: mapc::index::IndexOptions::default().beam,
         index_leaves: mapc::index::IndexOptions::default().leaves,
         index_leaf_size: mapc::index::IndexOptions::default().leaf_size,
+        db_limit: a.db_limit.clone(),
     };
     let built = pipeline::build(&src, &opts.config()).map_err(|e| input_err(anyhow::anyhow!(e)))?;
     let stem = a
