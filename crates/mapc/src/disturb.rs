@@ -110,11 +110,7 @@ pub fn scan(
 ) -> Vec<f32> {
     let xy = [sensor.x, sensor.y];
     let nominal = |k: usize| sensor.theta + lidar.angle(k);
-    let exact = |g: &BitGrid<'_>| -> Vec<f32> {
-        (0..lidar.beams)
-            .map(|k| beam(g, frame, xy, nominal(k), lidar.range_max))
-            .collect()
-    };
+    let exact = |g: &BitGrid<'_>| crate::sim::virtual_scan(g, frame, sensor, lidar);
     match class {
         Class::People => {
             let n = 1 + rng.below(10) as usize;
@@ -285,13 +281,7 @@ pub fn scan(
                 rng.range(-dp, dp) as f32,
                 rng.range(-dth, dth) as f32,
             );
-            let at = sensor.compose(&err);
-            (0..lidar.beams)
-                .map(|k| {
-                    let a = at.theta + lidar.angle(k);
-                    beam(grid, frame, [at.x, at.y], a, lidar.range_max)
-                })
-                .collect()
+            crate::sim::virtual_scan(grid, frame, &sensor.compose(&err), lidar)
         }
         Class::MotionDistortion => {
             let omega = rng.range(-1.0, 1.0) as f32;
