@@ -302,6 +302,15 @@ fn prior_of(a: &Args) -> Result<Option<refloc::Prior>, CliError> {
     Ok(prior)
 }
 
+/// Grows `scratch` (never shrinks it) to what a scan of `beams` beams
+/// needs against a database with `params`.
+fn grow_scratch(scratch: &mut Vec<u8>, params: &refloc::Params, beams: usize) {
+    let need = scratch_size(params, beams);
+    if scratch.len() < need {
+        scratch.resize(need, 0);
+    }
+}
+
 /// `mapc localize A.refdb B.refdb ... SCANS`: each scan against every
 /// database; the answer is the accepted localization with the highest
 /// confidence (its map, pose and confidence), or no map when none accepts
@@ -349,10 +358,7 @@ fn run_maps(a: &Args, ui: &Ui) -> CliResult {
         // (map, accepted, confidence, pose) of every database that answered.
         let mut per_map = Vec::with_capacity(dbs.len());
         for (i, db) in dbs.iter().enumerate() {
-            let need = scratch_size(db.params(), scan.data.len());
-            if scratch[i].len() < need {
-                scratch[i].resize(need, 0);
-            }
+            grow_scratch(&mut scratch[i], db.params(), scan.data.len());
             match refloc::localize(db, &input, &mut scratch[i]) {
                 Ok(l) => per_map.push((i, l.accepted, l.confidence, l.pose, None)),
                 Err(e) => {
@@ -477,10 +483,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                 continue;
             }
         };
-        let need = scratch_size(db.params(), scan.data.len());
-        if scratch.len() < need {
-            scratch.resize(need, 0);
-        }
+        grow_scratch(&mut scratch, db.params(), scan.data.len());
         let input = scan.data.as_scan();
         let t0 = Instant::now();
         let r = refloc::localize_with_prior(&db, &input, &mut scratch, prior);
