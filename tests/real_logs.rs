@@ -30,6 +30,8 @@ use refloc::{localize, scratch_size, RangeScan, Scan};
 /// ones; the share of scans whose given pose is off by more than the
 /// tolerance.
 struct LogResult {
+    /// Scans read from the whole log (before taking every `every`-th).
+    log_scans: usize,
     correct: f64,
     false_acc: f64,
     median: f64,
@@ -63,9 +65,13 @@ fn real_log(name: &str, beams: usize, every: usize) -> Option<LogResult> {
         &ReadOptions::default(),
     )
     .map(|s| s.expect("every line parses"))
-    .enumerate()
-    .filter(|(k, _)| k % every == 0)
     .collect();
+    let log_scans = scans.len();
+    let scans: Vec<_> = scans
+        .into_iter()
+        .enumerate()
+        .filter(|(k, _)| k % every == 0)
+        .collect();
     // (accepted and correct, accepted and wrong, error (m); the same two
     // against the locally corrected truth; given truth off by more than the
     // tolerance).
@@ -137,6 +143,7 @@ fn real_log(name: &str, beams: usize, every: usize) -> Option<LogResult> {
     let mut errs: Vec<f64> = results.iter().filter(|r| r.0).map(|r| r.2).collect();
     errs.sort_by(|a, b| a.total_cmp(b));
     let r = LogResult {
+        log_scans,
         correct: share(|r| r.0),
         false_acc: share(|r| r.1),
         median: errs.get(errs.len() / 2).copied().unwrap_or(f64::NAN),
@@ -164,6 +171,7 @@ fn csail_log_against_csail_map() {
     let Some(r) = real_log("csail", 361, 1) else {
         return;
     };
+    assert_eq!(r.log_scans, 406);
     // Measured with the default decision model (not fitted on CSAIL):
     // 92.9% / 4.7% against the given poses, 97.5% / 0.0% against the
     // corrected ones (docs/results.md).
