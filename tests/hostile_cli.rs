@@ -147,6 +147,99 @@ fn localize_from_a_stream_answers_each_scan_before_the_next_arrives() {
     assert!(status.success());
 }
 
+/// Reads one line from `out` on a helper thread, so that a process that
+/// never answers fails the test instead of hanging it (a bound on a
+/// deadlock, not a timing assertion).
+fn read_line_or_fail(
+    out: BufReader<std::process::ChildStdout>,
+) -> (String, BufReader<std::process::ChildStdout>) {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut out = out;
+        let mut line = String::new();
+        let r = out.read_line(&mut line).map(|_| line);
+        let _ = tx.send((r, out));
+    });
+    let (line, out) = rx
+        .recv_timeout(std::time::Duration::from_secs(300))
+        .expect("no result from mapc localize");
+    (line.unwrap(), out)
+}
+
+#[test]
+fn a_database_truncated_under_a_running_localize_does_not_kill_it() {
+    // Item 7 of issue 17: with the database mapped, truncating the file
+    // under `mapc localize -` killed it with SIGBUS at the next access and
+    // lost the results not yet written. Databases up to MAX_READ_DB_BYTES
+    // are now read into memory, so the run goes on with what it read.
+    let (db, scans) = fixture();
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("live.refdb");
+    std::fs::copy(db, &copy).unwrap();
+    let lines: Vec<String> = std::fs::read_to_string(scans)
+        .unwrap()
+        .lines()
+        .take(2)
+        .map(str::to_string)
+        .collect();
+    let mut child = mapc()
+        .args(["localize", copy.to_str().unwrap(), "-", "--no-candidates"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let out = BufReader::new(child.stdout.take().unwrap());
+    writeln!(stdin, "{}", lines[0]).unwrap();
+    stdin.flush().unwrap();
+    let (first, out) = read_line_or_fail(out);
+    // Truncate the file in place, then write other bytes into it: a
+    // mapping would now point past the end of the file.
+    let f = std::fs::OpenOptions::new().write(true).open(&copy).unwrap();
+    f.set_len(0).unwrap();
+    drop(f);
+    std::fs::write(&copy, b"not a database any more").unwrap();
+    writeln!(stdin, "{}", lines[1]).unwrap();
+    stdin.flush().unwrap();
+    let (second, _out) = read_line_or_fail(out);
+    drop(stdin);
+    let o = child.wait_with_output().unwrap();
+    assert!(
+        o.status.success(),
+        "{:?}: {}",
+        o.status,
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let a: serde_json::Value = serde_json::from_str(&first).unwrap();
+    let b: serde_json::Value = serde_json::from_str(&second).unwrap();
+    assert_eq!(
+        (a["id"].as_str(), b["id"].as_str()),
+        (Some("s0"), Some("s1"))
+    );
+    // The second scan was localized against the database as it was read.
+    let again = mapc()
+        .args(["localize", db.to_str().unwrap(), "-", "--no-candidates"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .and_then(|mut c| {
+            writeln!(c.stdin.take().unwrap(), "{}\n{}", lines[0], lines[1])?;
+            c.wait_with_output()
+        })
+        .unwrap();
+    let ref_second: serde_json::Value = serde_json::from_str(
+        String::from_utf8_lossy(&again.stdout)
+            .lines()
+            .nth(1)
+            .unwrap(),
+    )
+    .unwrap();
+    for k in ["x", "y", "theta", "accepted", "confidence"] {
+        assert_eq!(b[k], ref_second[k], "{k}");
+    }
+}
+
 #[test]
 fn eval_check_refuses_an_endless_baseline_before_evaluating() {
     if !Path::new("/dev/zero").exists() {

@@ -884,7 +884,8 @@ pub fn localize_with_prior<'s, D: AsRef<[u8]>>(
     loc.set_prior(prior)?;
     loc.prepare(scan)?;
     let nc = loc.rank();
-    let mut search = Search::new(db.params());
+    let decision = db.decision().unwrap_or(Decision::DEFAULT);
+    let mut search = Search::new(db.params()).with_decision(decision);
     let mut examined = nc;
     for c in 0..nc {
         let r = loc.ranked()[c];

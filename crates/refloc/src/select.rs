@@ -44,6 +44,25 @@ pub const DISTINCT_HEADING: f32 = 20.0 * core::f32::consts::PI / 180.0;
 /// short (blocked by something unmapped in front).
 pub const EARLY_SHORT_SHARE: u32 = 5;
 
+/// The early stop on real scans: once the best answer so far has a
+/// confidence ([`Decision::probability`], capped by [`capped_confidence`] as
+/// the answer's is) of at least this, the search confirms it (as after a
+/// confident match) and stops. Real scans of a map made by another run
+/// rarely explain 90% of their beams (`early_accept`), so without it every
+/// query examined all N_C candidates. Chosen on the real Intel and ACES
+/// logs (`mapc localize` candidate lists replayed under candidate stop
+/// rules, docs/performance.md "Stopping on confidence"): at 0.99 the
+/// accepted and false-accepted answers of both logs are those of the full
+/// search; at 0.98 and 0.95 false accepts rise by 0.1 to 0.9 points.
+pub const EARLY_CONFIDENCE: f32 = 0.99;
+
+/// The confidence stop ([`EARLY_CONFIDENCE`]) waits for at least this many
+/// coarse candidates (examined or not): support, one of the confidence's
+/// features, counts the candidates that found the same pose, and needs a
+/// few to mean anything. 4 to 12 gave the same decisions in the replay; 6
+/// is the middle.
+pub const EARLY_CONFIDENCE_MIN: usize = 6;
+
 /// True when the poses of `a` and `b` are distinct alternatives (see
 /// [`DISTINCT_DISTANCE`], [`DISTINCT_HEADING`]).
 pub fn distinct(a: &Candidate, b: &Candidate) -> bool {
@@ -149,12 +168,17 @@ pub enum Next {
 /// passing best, the search examines the candidates the coarse stage rates
 /// within [`EARLY_CONFIRM_GAMMA`] of the one that stopped it (a twin place
 /// ranks there, and the ambiguity test sees only what was examined), at
-/// most [`CONFIRM_MAX`] of them, skipping those near the best pose.
+/// most [`CONFIRM_MAX`] of them, skipping those near the best pose. With a
+/// confidence model ([`Search::with_decision`]) the best answer reaching
+/// [`EARLY_CONFIDENCE`] after [`EARLY_CONFIDENCE_MIN`] candidates starts
+/// the same confirmation.
 #[derive(Clone, Copy, Debug)]
 pub struct Search {
     selection: Selection,
     early_accept: f32,
     early_min: usize,
+    ambiguity_ratio: f32,
+    decision: Option<Decision>,
     best: Option<usize>,
     /// Set by the early stop: the coarse score below which the search ends.
     floor: Option<f32>,
@@ -168,9 +192,34 @@ impl Search {
             selection: params.selection,
             early_accept: params.early_accept,
             early_min: params.early_min as usize,
+            ambiguity_ratio: params.ambiguity_ratio,
+            decision: None,
             best: None,
             floor: None,
             confirmed: 0,
+        }
+    }
+
+    /// The same search that also stops on the confidence of its best answer
+    /// under `decision` ([`EARLY_CONFIDENCE`]); the localizer passes the
+    /// database's model (or [`Decision::DEFAULT`]).
+    pub fn with_decision(self, decision: Decision) -> Search {
+        Search {
+            decision: Some(decision),
+            ..self
+        }
+    }
+
+    /// The confidence (0..=1) of candidate `b` as the answer among `cands`
+    /// under the search's model: its probability, capped when another
+    /// distinct pose makes it ambiguous. 0 without a model.
+    pub fn confidence(&self, cands: &[Candidate], b: usize) -> f32 {
+        match (self.decision, cands.get(b)) {
+            (Some(d), Some(c)) if c.has_pose != 0 => capped_confidence(
+                d.probability(&confidence::features(cands, c)),
+                ambiguous(cands, c, self.ambiguity_ratio),
+            ),
+            _ => 0.0,
         }
     }
 
@@ -219,10 +268,17 @@ impl Search {
         let confident = explained_ratio(cand) >= self.early_accept
             && cand.short_beams * EARLY_SHORT_SHARE <= cand.pairs
             && passes(cand);
-        let done = self.selection == Selection::Vicinity
-            && self.early_accept > 0.0
-            && (confident || (self.early_min > 0 && c + 1 >= self.early_min && best_ok));
-        if done && self.floor.is_none() {
+        let enabled = self.selection == Selection::Vicinity && self.early_accept > 0.0;
+        if !enabled || self.floor.is_some() {
+            return;
+        }
+        let sure = || {
+            c + 1 >= EARLY_CONFIDENCE_MIN
+                && self
+                    .best
+                    .is_some_and(|b| self.confidence(cands, b) >= EARLY_CONFIDENCE)
+        };
+        if confident || (self.early_min > 0 && c + 1 >= self.early_min && best_ok) || sure() {
             self.floor = Some(gamma - EARLY_CONFIRM_GAMMA);
         }
     }
@@ -478,6 +534,62 @@ mod tests {
         assert_eq!(s.next(0.85, [1.0, 1.0], &cands), Next::Skip);
         // Below the floor: stop.
         assert_eq!(s.next(0.82, [10.0, 0.0], &cands), Next::Stop);
+    }
+
+    #[test]
+    fn a_confident_answer_stops_after_early_confidence_min_candidates() {
+        // Real-scan matches: 75 of 90 explained (0.83, under early_accept
+        // 0.9), found again from every site. With the model, the search stops
+        // once EARLY_CONFIDENCE_MIN candidates agree; without it, never.
+        let p = params();
+        let mut with = Search::new(&p).with_decision(Decision::DEFAULT);
+        let mut without = Search::new(&p);
+        let mut cands = vec![];
+        for k in 0..EARLY_CONFIDENCE_MIN + 2 {
+            cands.push(cand(0.01 * k as f32, 0.0, 0.0, 75.0, 0));
+            with.record(&cands, 0.9);
+            without.record(&cands, 0.9);
+            assert_eq!(
+                with.stopping(),
+                k + 1 >= EARLY_CONFIDENCE_MIN,
+                "after {}",
+                k + 1
+            );
+            assert!(!without.stopping());
+        }
+        assert!(with.confidence(&cands, 0) >= EARLY_CONFIDENCE);
+        assert_eq!(without.confidence(&cands, 0), 0.0);
+        // After the stop the confirmation runs as after a confident match.
+        assert_eq!(with.next(0.88, [30.0, 0.0], &cands), Next::Examine);
+        assert_eq!(with.next(0.8, [30.0, 0.0], &cands), Next::Stop);
+    }
+
+    #[test]
+    fn a_twin_keeps_the_confidence_stop_from_firing() {
+        let p = params();
+        let mut s = Search::new(&p).with_decision(Decision::DEFAULT);
+        let mut cands = vec![cand(10.0, 0.0, 0.0, 74.0, 0)];
+        s.record(&cands, 0.9);
+        for k in 0..2 * EARLY_CONFIDENCE_MIN {
+            cands.push(cand(0.01 * k as f32, 0.0, 0.0, 75.0, 0));
+            s.record(&cands, 0.9);
+        }
+        let best = s.best().unwrap();
+        assert!(s.confidence(&cands, best) <= AMBIGUOUS_CONFIDENCE);
+        assert!(
+            !s.stopping(),
+            "an ambiguous answer must not stop the search"
+        );
+        // Nor does it fire with the early stop switched off.
+        let mut off = params();
+        off.early_accept = 0.0;
+        let mut s = Search::new(&off).with_decision(Decision::DEFAULT);
+        let mut c = vec![];
+        for k in 0..2 * EARLY_CONFIDENCE_MIN {
+            c.push(cand(0.01 * k as f32, 0.0, 0.0, 75.0, 0));
+            s.record(&c, 0.9);
+        }
+        assert!(!s.stopping());
     }
 
     #[test]
