@@ -9,6 +9,7 @@ use std::time::Instant;
 use mapc::pipeline;
 
 use crate::build::{load_map, BuildOpts, DbLimitArgs, MapLimitArgs};
+use crate::eval::Experiment;
 use crate::util::outln;
 use crate::util::{fail_err, input_err, CliResult, Ui};
 
@@ -105,10 +106,10 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         noise: 0.005,
         outliers: 60,
         experiments: vec![
-            "static".into(),
-            "dynamic".into(),
-            "dynamic-swap".into(),
-            "e1".into(),
+            Experiment::Static,
+            Experiment::Dynamic,
+            Experiment::DynamicSwap,
+            Experiment::E1,
         ],
         e1_trials: 100,
         e2_trials: 10,

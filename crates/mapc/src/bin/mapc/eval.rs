@@ -14,6 +14,77 @@ use serde_json::{json, Value};
 use crate::util::outln;
 use crate::util::{fail_err, input_err, open_db, read_aux_text, Check, CliResult, Ui};
 
+/// One value of `mapc eval --experiments`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Experiment {
+    /// E4 with noise-free scans.
+    Static,
+    /// E4 with range noise and random short returns (`--noise`, `--outliers`).
+    Dynamic,
+    /// E4 with range noise and beams swapped pairwise.
+    DynamicSwap,
+    /// E1: scan-to-scan SSM accuracy (Table 1).
+    E1,
+    /// E2: robustness curves (Fig. 6).
+    E2,
+    /// Scans of another map (`--foreign`) that must not be accepted.
+    WrongMap,
+    /// Every class of the disturbance suite.
+    Disturbances,
+    /// One class of the disturbance suite.
+    Disturbance(mapc::disturb::Class),
+}
+
+impl Experiment {
+    const PAPER: [Experiment; 7] = [
+        Experiment::Static,
+        Experiment::Dynamic,
+        Experiment::DynamicSwap,
+        Experiment::E1,
+        Experiment::E2,
+        Experiment::WrongMap,
+        Experiment::Disturbances,
+    ];
+    /// Every value, the disturbance classes in `disturb::Class::ALL` order.
+    const ALL: [Experiment; Self::PAPER.len() + mapc::disturb::Class::ALL.len()] = {
+        let mut all = [Experiment::Static; Self::PAPER.len() + mapc::disturb::Class::ALL.len()];
+        let mut i = 0;
+        while i < Self::PAPER.len() {
+            all[i] = Self::PAPER[i];
+            i += 1;
+        }
+        let mut k = 0;
+        while k < mapc::disturb::Class::ALL.len() {
+            all[i + k] = Experiment::Disturbance(mapc::disturb::Class::ALL[k]);
+            k += 1;
+        }
+        all
+    };
+
+    /// The name on the command line and in the report.
+    pub fn name(self) -> &'static str {
+        match self {
+            Experiment::Static => "static",
+            Experiment::Dynamic => "dynamic",
+            Experiment::DynamicSwap => "dynamic-swap",
+            Experiment::E1 => "e1",
+            Experiment::E2 => "e2",
+            Experiment::WrongMap => "wrong-map",
+            Experiment::Disturbances => "disturbances",
+            Experiment::Disturbance(c) => c.name(),
+        }
+    }
+}
+
+impl clap::ValueEnum for Experiment {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Self::ALL
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()))
+    }
+}
+
 #[derive(clap::Args, Debug, Clone)]
 pub struct Args {
     /// The database.
@@ -42,13 +113,16 @@ pub struct Args {
     /// Outliers per scan in the dynamic runs (random short returns; and x-y swaps in dynamic-swap).
     #[arg(long, default_value_t = 60)]
     pub outliers: usize,
-    /// Experiments to run, comma separated: static, dynamic, dynamic-swap, e1, e2, wrong-map, and the disturbance suite: people, furniture-added, furniture-removed, doors, shifted, missing-returns, range-noise, angular-jitter, motion, mount-error (or `disturbances` for all of them; docs/results.md).
+    /// Experiments to run, comma separated: the paper's (static, dynamic,
+    /// dynamic-swap, e1, e2, wrong-map) and the disturbance suite, one class
+    /// at a time or `disturbances` for all of them (docs/results.md).
     #[arg(
         long,
-        default_value = "static,dynamic,dynamic-swap,e1",
+        value_enum,
+        default_values = ["static", "dynamic", "dynamic-swap", "e1"],
         value_delimiter = ','
     )]
-    pub experiments: Vec<String>,
+    pub experiments: Vec<Experiment>,
     /// E4 runs with a prior region of this radius (m) around each true pose
     /// (its centre moved by up to half the radius; 0: no region).
     #[arg(long, default_value_t = 0.0, value_name = "M")]
@@ -197,30 +271,11 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
             "--fov must be in (0, 360] degrees and --beams at least 3"
         )));
     }
-    let all_disturbances = a.experiments.iter().any(|x| x == "disturbances");
-    let want = |e: &str| {
-        a.experiments.iter().any(|x| x == e)
-            || (all_disturbances && mapc::disturb::Class::parse(e).is_some())
+    let want = |e: Experiment| {
+        a.experiments.contains(&e)
+            || (matches!(e, Experiment::Disturbance(_))
+                && a.experiments.contains(&Experiment::Disturbances))
     };
-    for e in &a.experiments {
-        if ![
-            "static",
-            "dynamic",
-            "dynamic-swap",
-            "e1",
-            "e2",
-            "wrong-map",
-            "disturbances",
-        ]
-        .contains(&e.as_str())
-            && mapc::disturb::Class::parse(e).is_none()
-        {
-            return Err(input_err(anyhow::anyhow!(
-                "unknown experiment '{e}' (known: static, dynamic, dynamic-swap, e1, e2, wrong-map, disturbances, {})",
-                mapc::disturb::Class::ALL.map(|c| c.name()).join(", ")
-            )));
-        }
-    }
     let spec = |noise: f32, short: usize, swap: usize| ScanSpec {
         beams: a.beams,
         fov,
@@ -247,21 +302,22 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
         "sites": db.site_count(),
     });
     let runs: Vec<(&str, ScanSpec)> = [
-        ("static", spec(0.0, 0, 0)),
-        ("dynamic", spec(a.noise, a.outliers, 0)),
-        ("dynamic-swap", spec(a.noise, 0, a.outliers)),
+        (Experiment::Static, spec(0.0, 0, 0)),
+        (Experiment::Dynamic, spec(a.noise, a.outliers, 0)),
+        (Experiment::DynamicSwap, spec(a.noise, 0, a.outliers)),
     ]
     .into_iter()
     .chain(mapc::disturb::Class::ALL.map(|c| {
         (
-            c.name(),
+            Experiment::Disturbance(c),
             ScanSpec {
                 disturbance: Some(c),
                 ..spec(0.0, 0, 0)
             },
         )
     }))
-    .filter(|(n, _)| want(n))
+    .filter(|&(e, _)| want(e))
+    .map(|(e, sp)| (e.name(), sp))
     .collect();
     let mut static_trials: Option<Vec<Trial>> = None;
     for (name, sp) in runs {
@@ -352,7 +408,7 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
         }
     }
     let _ = static_trials;
-    if want("wrong-map") {
+    if want(Experiment::WrongMap) {
         let Some(fp) = &a.foreign else {
             return Err(input_err(anyhow::anyhow!(
                 "wrong-map needs --foreign MAP.yaml"
@@ -412,7 +468,7 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
             serde_json::to_value(&s).unwrap_or(Value::Null),
         );
     }
-    if want("e1") {
+    if want(Experiment::E1) {
         let done = AtomicU64::new(0);
         let pb = ui.progress(a.e1_trials as u64, "e1");
         let e1poses = eval::sample_poses(&db, a.e1_trials, a.clearance, a.seed ^ 0xE1);
@@ -473,7 +529,7 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
             "sd_mm_mm_deg": [sd[0]*1000.0, sd[1]*1000.0, sd[2].to_degrees()],
             "paper_mean": [0.27, -0.42, 0.01], "paper_sd": [10.51, 7.99, 0.09]});
     }
-    if want("e2") {
+    if want(Experiment::E2) {
         use rayon::prelude::*;
         let base = eval::sample_poses(&db, a.e2_trials, a.clearance, a.seed ^ 0xE2);
         let curve = |noise: f32, outliers: usize, tag: u64| -> f64 {
