@@ -104,7 +104,7 @@ fn summary(db: &Db<'_>, sets: &[(Kind, Condition, Vec<Query>)]) {
          first candidate; N_C: coarse candidate count, mean; \
          M/max: the answer's vicinity score M / (4.5 N_P), mean; expl.: M / (4.5 (N_P - short beams)), \
          mean; the early stop needs expl. >= early_accept = {} with at most N_P/5 short beams)\n",
-        db.params().early_accept
+        db.params().select.early_accept
     );
 }
 

@@ -188,7 +188,7 @@ fn exercise_db(bytes: &[u8]) {
         p.sensor.beams as usize,
         "scan() length"
     );
-    assert_eq!(db.hist(n - 1).len(), p.hist_cells(), "hist() length");
+    assert_eq!(db.hist(n - 1).len(), p.coarse.hist_cells(), "hist() length");
 
     let ranges = fixed_ranges();
     let reference = db.scan(0);

@@ -110,10 +110,10 @@ pub struct DbSize {
 /// [`crate::pipeline::build`] but the index and the manifest.
 pub fn db_size(params: &Params, width: u32, height: u32, sites: usize, neighbours: u64) -> DbSize {
     let floats = params.sensor.beams as u64
-        + params.hist_cells() as u64
-        + (params.win_count() as u64)
-            .saturating_mul(params.win_headings as u64)
-            .saturating_mul(params.win_cells() as u64);
+        + params.coarse.hist_cells() as u64
+        + (params.coarse.win_count() as u64)
+            .saturating_mul(params.coarse.win_headings as u64)
+            .saturating_mul(params.coarse.win_cells() as u64);
     let per_site = floats
         .saturating_mul(4)
         .saturating_add(std::mem::size_of::<SiteRecord>() as u64);
@@ -168,11 +168,11 @@ pub fn scan_histogram(ranges: &[f32], params: &Params) -> Vec<f32> {
         s.range_max,
         &mut dense,
     );
-    let p = params.max_points as usize;
+    let p = params.prep.max_points as usize;
     let (mut pts, mut tan) = (vec![[0f32; 2]; p], vec![[0f32; 2]; p]);
     let wrap = prep::covers_full_turn(s.angle_increment, s.beams as usize);
     let m = prep::prepare(&dense[..n], wrap, params, &mut pts, &mut tan);
-    let mut h = vec![0f32; params.hist_cells()];
+    let mut h = vec![0f32; params.coarse.hist_cells()];
     pgr::histogram(&pts[..m], &tan[..m], params, &mut h);
     h
 }
@@ -191,13 +191,13 @@ pub fn window_histograms(ranges: &[f32], params: &Params) -> Vec<f32> {
         s.range_max,
         &mut dense,
     );
-    let p = params.max_points as usize;
+    let p = params.prep.max_points as usize;
     let (mut pts, mut tan) = (vec![[0f32; 2]; p], vec![[0f32; 2]; p]);
-    let k = params.win_cells();
-    let nh = params.win_headings as usize;
-    let mut out = Vec::with_capacity(params.win_count() * nh * k);
+    let k = params.coarse.win_cells();
+    let nh = params.coarse.win_headings as usize;
+    let mut out = Vec::with_capacity(params.coarse.win_count() * nh * k);
     let mut window: Vec<[f32; 2]> = Vec::with_capacity(ranges.len());
-    for &width in &params.win_widths[..params.win_count()] {
+    for &width in &params.coarse.win_widths[..params.coarse.win_count()] {
         for h in 0..nh {
             let heading = h as f32 * 2.0 * std::f32::consts::PI / nh as f32;
             // Beams within width/2 of the heading, in counter-clockwise order
@@ -224,9 +224,9 @@ pub fn window_histograms(ranges: &[f32], params: &Params) -> Vec<f32> {
             pgr::histogram_binned(
                 &pts[..m],
                 &tan[..m],
-                params.win_rho_bins as usize,
-                params.win_theta_bins as usize,
-                params.hist_rho_max,
+                params.coarse.win_rho_bins as usize,
+                params.coarse.win_theta_bins as usize,
+                params.coarse.hist_rho_max,
                 &mut hh,
             );
             out.extend_from_slice(&hh);
@@ -348,20 +348,22 @@ pub fn compile_with(
             queries: 0,
             samples: 0,
             positives: 0,
-            w: params.w,
+            w: params.ssm.w,
             seed: input.fit_seed,
         }
     };
-    params.w = fit.w;
+    params.ssm.w = fit.w;
     lap("compile.fit");
     params
         .validate()
         .map_err(|f| format!("invalid fitted parameter: {f}"))?;
-    let hist_bytes = per_scan_bytes(&scans, params.hist_cells(), |s| scan_histogram(s, &params));
+    let hist_bytes = per_scan_bytes(&scans, params.coarse.hist_cells(), |s| {
+        scan_histogram(s, &params)
+    });
     lap("compile.hists");
     let window_bytes = per_scan_bytes(
         &scans,
-        params.win_count() * params.win_headings as usize * params.win_cells(),
+        params.coarse.win_count() * params.coarse.win_headings as usize * params.coarse.win_cells(),
         |s| window_histograms(s, &params),
     );
     lap("compile.windows");

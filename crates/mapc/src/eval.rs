@@ -364,9 +364,9 @@ pub fn coarse_scores<D: AsRef<[u8]>>(
     wrap: bool,
 ) -> Vec<f32> {
     let params = db.params();
-    let p = params.max_points as usize;
+    let p = params.prep.max_points as usize;
     let (mut qp, mut qt) = (vec![[0f32; 2]; p], vec![[0f32; 2]; p]);
-    let mut h = vec![0f32; params.hist_cells().max(params.win_cells())];
+    let mut h = vec![0f32; params.coarse.hist_cells().max(params.coarse.win_cells())];
     let (window, cells) =
         refloc::coarse::query_histogram(dense, fov, wrap, params, &mut qp, &mut qt, &mut h);
     (0..db.site_count())
@@ -387,9 +387,14 @@ pub fn coarse_rank(scores: &[f32], site: usize) -> usize {
 /// N_C for the given scores, by the database's rule.
 pub fn coarse_nc<D: AsRef<[u8]>>(db: &RefDb<D>, scores: &[f32]) -> usize {
     let p = db.params();
-    let mut top = vec![refloc::coarse::Ranked::default(); p.nc_max as usize];
+    let mut top = vec![refloc::coarse::Ranked::default(); p.coarse.nc_max as usize];
     let n = refloc::coarse::rank_top_scores(scores.iter().copied(), &mut top);
-    refloc::coarse::candidate_count(&top[..n], p.nc_min as usize, p.nc_max as usize, p.nc_margin)
+    refloc::coarse::candidate_count(
+        &top[..n],
+        p.coarse.nc_min as usize,
+        p.coarse.nc_max as usize,
+        p.coarse.nc_margin,
+    )
 }
 
 /// A simulated scan at `truth` (robot pose) seen through `db`'s grid (or
@@ -544,7 +549,7 @@ pub fn run_e4<D: AsRef<[u8]> + Sync>(
                         // threshold = 4.5 N_P accept_ratio, so M / (4.5 N_P) = M / threshold * ratio.
                         if l.vicinity_threshold > 0.0 {
                             trial.vicinity_ratio = (l.vicinity / l.vicinity_threshold
-                                * db.params().accept_ratio)
+                                * db.params().verify.accept_ratio)
                                 as f64;
                         }
                         trial.candidates = l.candidates.len();
@@ -703,7 +708,7 @@ pub fn ssm_match_pair<D: AsRef<[u8]>>(db: &RefDb<D>, pair: &E1Pair) -> E1Trial {
     let params = db.params();
     let (q, ref_pts, n_in) = (&pair.query, &pair.reference, pair.inliers);
     let motion = Pose2::new(pair.motion[0], pair.motion[1], pair.motion[2]);
-    let np = params.max_points as usize;
+    let np = params.prep.max_points as usize;
     let (mut qp, mut qt, mut rp, mut rt) = (
         vec![[0f32; 2]; np],
         vec![[0f32; 2]; np],
@@ -713,13 +718,13 @@ pub fn ssm_match_pair<D: AsRef<[u8]>>(db: &RefDb<D>, pair: &E1Pair) -> E1Trial {
     let t0 = std::time::Instant::now();
     let nq = prep::prepare(q, true, params, &mut qp, &mut qt);
     let nr = prep::prepare(ref_pts, true, params, &mut rp, &mut rt);
-    let nl = np * params.tentative_k as usize;
+    let nl = np * params.ssm.tentative_k as usize;
     let (mut qd, mut rd) = (vec![0f32; np * DESC_LEN], vec![0f32; np * DESC_LEN]);
-    ssm::descriptors(&qp[..nq], &qt[..nq], params.desc_radius, &mut qd);
-    ssm::descriptors(&rp[..nr], &rt[..nr], params.desc_radius, &mut rd);
+    ssm::descriptors(&qp[..nq], &qt[..nq], params.ssm.desc_radius, &mut qd);
+    ssm::descriptors(&rp[..nr], &rt[..nr], params.ssm.desc_radius, &mut rd);
     let (mut tent, mut aff) = (
         vec![[0u16; 2]; nl],
-        vec![ssm::Affinity::default(); params.affinity_cap as usize],
+        vec![ssm::Affinity::default(); params.ssm.affinity_cap as usize],
     );
     let (mut x, mut y, mut order) = (vec![0f32; nl], vec![0f32; nl], vec![0u16; nl]);
     let (mut acc, mut flags) = (vec![[0u16; 2]; np], vec![0u8; 3 * np + nl]);

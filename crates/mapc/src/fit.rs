@@ -56,14 +56,14 @@ pub fn fit_weights(
         range_max: s.range_max,
     };
     let mut rng = Rng::new(seed);
-    let p = params.max_points as usize;
+    let p = params.prep.max_points as usize;
     let mut qp = vec![[0f32; 2]; p];
     let mut qt = vec![[0f32; 2]; p];
     let mut rp = vec![[0f32; 2]; p];
     let mut rt = vec![[0f32; 2]; p];
     let mut qd = vec![0f32; p * DESC_LEN];
     let mut rd = vec![0f32; p * DESC_LEN];
-    let mut tent = vec![[0u16; 2]; p * params.tentative_k as usize];
+    let mut tent = vec![[0u16; 2]; p * params.ssm.tentative_k as usize];
     let mut xs: Vec<[f32; 2]> = Vec::new();
     let mut ys: Vec<f32> = Vec::new();
     let mut used = 0;
@@ -73,7 +73,7 @@ pub fn fit_weights(
             queries: 0,
             samples: 0,
             positives: 0,
-            w: params.w,
+            w: params.ssm.w,
             seed,
         };
     }
@@ -125,9 +125,9 @@ pub fn fit_weights(
             continue;
         }
         used += 1;
-        ssm::descriptors(&qp[..nq], &qt[..nq], params.desc_radius, &mut qd);
-        ssm::descriptors(&rp[..nr], &rt[..nr], params.desc_radius, &mut rd);
-        let nl = ssm::tentative(nq, nr, params.tentative_k as usize, &qd, &rd, &mut tent);
+        ssm::descriptors(&qp[..nq], &qt[..nq], params.ssm.desc_radius, &mut qd);
+        ssm::descriptors(&rp[..nr], &rt[..nr], params.ssm.desc_radius, &mut rd);
+        let nl = ssm::tentative(nq, nr, params.ssm.tentative_k as usize, &qd, &rd, &mut tent);
         // True transform: query sensor frame -> site frame (heading 0 at the site).
         let truth = Pose2::new(c[0], c[1], 0.0).inverse().compose(&sensor);
         let correct: Vec<bool> = tent[..nl]
@@ -141,9 +141,15 @@ pub fn fit_weights(
         // Every positive pair, and a deterministic subsample of the negatives.
         for a in 0..nl {
             for b in (a + 1)..nl {
-                let Some((drho, dth2)) =
-                    ssm::pair_deformation(&qp, &qt, &rp, &rt, tent[a], tent[b], params.max_rho_dev)
-                else {
+                let Some((drho, dth2)) = ssm::pair_deformation(
+                    &qp,
+                    &qt,
+                    &rp,
+                    &rt,
+                    tent[a],
+                    tent[b],
+                    params.ssm.max_rho_dev,
+                ) else {
                     continue;
                 };
                 let pos = correct[a] && correct[b];
@@ -162,7 +168,7 @@ pub fn fit_weights(
     let w = if positives > 10 && positives < ys.len() {
         logistic_irls(&xs, &ys, 8.0)
     } else {
-        params.w
+        params.ssm.w
     };
     FitReport {
         queries: used,

@@ -338,11 +338,11 @@ pub fn build(
         return Ok(None);
     }
     let (nw, nh, wc) = (
-        params.win_count(),
-        params.win_headings as usize,
-        params.win_cells(),
+        params.coarse.win_count(),
+        params.coarse.win_headings as usize,
+        params.coarse.win_cells(),
     );
-    let full = params.hist_cells();
+    let full = params.coarse.hist_cells();
     if hists.len() != sites * full * 4 || windows.len() != sites * nw * nh * wc * 4 {
         return Err("index: histogram sections do not match the site count".into());
     }

@@ -5,7 +5,10 @@
 use std::time::Instant;
 
 use refloc::format::SectionKind;
-use refloc::params::{Params, Selection};
+use refloc::params::{
+    CoarseParams, Params, PrepParams, RefineParams, SelectParams, Selection, SensorModel,
+    SsmParams, VerifyParams,
+};
 use refloc::Pose2;
 use serde::Serialize;
 use sha2::Digest;
@@ -43,8 +46,10 @@ pub struct BuildConfig {
     pub nc_max: u32,
     /// Vicinity acceptance ratio (paper 0.5).
     pub accept_ratio: f32,
-    /// Site selection rule: "vicinity" or "match-score" (paper).
-    pub selection: String,
+    /// Site selection rule; the manifest spells it [`selection_name`]
+    /// ("vicinity" or "match-score", the paper's).
+    #[serde(serialize_with = "serialize_selection")]
+    pub selection: Selection,
     /// Pose refinement iterations against the map (0: off, as the paper).
     pub refine_iters: u32,
     /// SSM tentative correspondences per input point.
@@ -86,8 +91,22 @@ pub struct BuildConfig {
     pub max_db_bytes: u64,
 }
 
+/// The name of a site selection rule on the command line and in the
+/// manifest: "vicinity" or "match-score".
+pub fn selection_name(s: Selection) -> &'static str {
+    match s {
+        Selection::Vicinity => "vicinity",
+        Selection::MatchScore => "match-score",
+    }
+}
+
+fn serialize_selection<S: serde::Serializer>(s: &Selection, ser: S) -> Result<S::Ok, S::Error> {
+    ser.serialize_str(selection_name(*s))
+}
+
 impl Default for BuildConfig {
     fn default() -> Self {
+        let p = Params::defaults(362, 30.0);
         BuildConfig {
             beams: 362,
             range_max: 30.0,
@@ -98,21 +117,21 @@ impl Default for BuildConfig {
             coverage_range: 8.0,
             fit_queries: 150,
             seed: 1,
-            nc_max: Params::defaults(362, 30.0).nc_max,
+            nc_max: p.coarse.nc_max,
             accept_ratio: 0.5,
-            selection: "vicinity".into(),
-            refine_iters: Params::defaults(362, 30.0).refine_iters,
-            tentative_k: Params::defaults(362, 30.0).tentative_k,
-            max_points: Params::defaults(362, 30.0).max_points,
-            early_accept: Params::defaults(362, 30.0).early_accept,
+            selection: p.select.selection,
+            refine_iters: p.refine.refine_iters,
+            tentative_k: p.ssm.tentative_k,
+            max_points: p.prep.max_points,
+            early_accept: p.select.early_accept,
             fov_windows_deg: vec![180.0, 270.0],
-            early_min: Params::defaults(362, 30.0).early_min,
-            ambiguity_ratio: Params::defaults(362, 30.0).ambiguity_ratio,
-            affinity_cap: Params::defaults(362, 30.0).affinity_cap,
-            through_max: Params::defaults(362, 30.0).through_max,
-            short_weight: Params::defaults(362, 30.0).short_weight,
-            through_run: Params::defaults(362, 30.0).through_run,
-            occlusion_fit: Params::defaults(362, 30.0).occlusion_fit,
+            early_min: p.select.early_min,
+            ambiguity_ratio: p.select.ambiguity_ratio,
+            affinity_cap: p.ssm.affinity_cap,
+            through_max: p.verify.through_max,
+            short_weight: p.verify.short_weight,
+            through_run: p.verify.through_run,
+            occlusion_fit: p.verify.occlusion_fit,
             accept_confidence: refloc::Decision::DEFAULT.threshold,
             index: crate::index::IndexOptions::default(),
             max_db_bytes: compile::DEFAULT_MAX_DB_BYTES,
@@ -121,46 +140,65 @@ impl Default for BuildConfig {
 }
 
 impl BuildConfig {
-    /// Runtime parameters for this configuration (before the fit).
+    /// Runtime parameters for this configuration (before the fit): the
+    /// defaults for the sensor, with each group's options set.
     pub fn params(&self) -> Result<Params, String> {
-        let mut p = Params::defaults(self.beams, self.range_max);
-        p.sensor.offset = Pose2::new(
-            self.sensor_offset[0],
-            self.sensor_offset[1],
-            self.sensor_offset[2],
-        );
-        p.nc_max = self.nc_max;
-        p.nc_min = p.nc_min.min(self.nc_max);
-        p.accept_ratio = self.accept_ratio;
-        p.refine_iters = self.refine_iters;
-        p.tentative_k = self.tentative_k;
-        p.max_points = self.max_points;
-        p.early_accept = self.early_accept;
-        p.early_min = self.early_min;
-        p.ambiguity_ratio = self.ambiguity_ratio;
-        p.affinity_cap = self.affinity_cap;
-        p.through_max = self.through_max;
-        p.short_weight = self.short_weight;
-        p.through_run = self.through_run;
-        p.occlusion_fit = self.occlusion_fit;
-        if self.fov_windows_deg.len() > 2 {
-            return Err("at most two --fov-windows widths".into());
-        }
-        p.win_widths = [0.0; 2];
-        for (slot, w) in p.win_widths.iter_mut().zip(&self.fov_windows_deg) {
-            *slot = w.to_radians();
-        }
-        p.selection = match self.selection.as_str() {
-            "vicinity" => Selection::Vicinity,
-            "match-score" => Selection::MatchScore,
-            other => {
-                return Err(format!(
-                    "unknown selection rule '{other}' (expected vicinity or match-score)"
-                ))
-            }
+        let d = Params::defaults(self.beams, self.range_max);
+        let [x, y, theta] = self.sensor_offset;
+        let p = Params {
+            sensor: SensorModel {
+                offset: Pose2::new(x, y, theta),
+                ..d.sensor
+            },
+            prep: PrepParams {
+                max_points: self.max_points,
+                ..d.prep
+            },
+            coarse: CoarseParams {
+                nc_max: self.nc_max,
+                nc_min: d.coarse.nc_min.min(self.nc_max),
+                win_widths: self.win_widths()?,
+                ..d.coarse
+            },
+            ssm: SsmParams {
+                tentative_k: self.tentative_k,
+                affinity_cap: self.affinity_cap,
+                ..d.ssm
+            },
+            refine: RefineParams {
+                refine_iters: self.refine_iters,
+                ..d.refine
+            },
+            verify: VerifyParams {
+                accept_ratio: self.accept_ratio,
+                through_max: self.through_max,
+                short_weight: self.short_weight,
+                through_run: self.through_run,
+                occlusion_fit: self.occlusion_fit,
+                ..d.verify
+            },
+            select: SelectParams {
+                selection: self.selection,
+                early_accept: self.early_accept,
+                early_min: self.early_min,
+                ambiguity_ratio: self.ambiguity_ratio,
+            },
         };
         p.validate().map_err(|f| format!("invalid option: {f}"))?;
         Ok(p)
+    }
+
+    /// The stored window widths (rad; 0 for an unused slot) from
+    /// `fov_windows_deg` (degrees, at most two).
+    fn win_widths(&self) -> Result<[f32; 2], String> {
+        if self.fov_windows_deg.len() > 2 {
+            return Err("at most two --fov-windows widths".into());
+        }
+        let mut widths = [0.0; 2];
+        for (slot, w) in widths.iter_mut().zip(&self.fov_windows_deg) {
+            *slot = w.to_radians();
+        }
+        Ok(widths)
     }
 }
 

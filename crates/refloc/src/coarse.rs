@@ -109,7 +109,7 @@ pub fn rank_sites_where<D: AsRef<[u8]>>(
         Some(w) => ViewKind::Window(w),
     };
     if let Some(index) = db.index() {
-        let headings = (db.params().win_headings as usize).max(1);
+        let headings = (db.params().coarse.win_headings as usize).max(1);
         let mut n = 0usize;
         let searched = index.search(kind, hist, |e| {
             let e = e as usize;
@@ -150,12 +150,12 @@ pub fn candidate_count(ranked: &[Ranked], nc_min: usize, nc_max: usize, margin: 
 /// full histograms are used), else the index of the widest stored width not
 /// larger than `fov` (the narrowest one when `fov` is narrower than all).
 pub fn window_for(params: &crate::Params, fov: f32) -> Option<usize> {
-    let n = params.win_count();
+    let n = params.coarse.win_count();
     if n == 0 || !(fov < 2.0 * core::f32::consts::PI * 0.97) {
         return None;
     }
     let mut pick = 0;
-    for (i, w) in params.win_widths[..n].iter().enumerate() {
+    for (i, w) in params.coarse.win_widths[..n].iter().enumerate() {
         if *w <= fov + 0.05 {
             pick = i;
         }
@@ -194,18 +194,18 @@ pub fn query_histogram(
         None => {
             let n = crate::prep::prepare(dense, wrap, params, pts, tan);
             crate::pgr::histogram(&pts[..n], &tan[..n], params, out);
-            (None, params.hist_cells())
+            (None, params.coarse.hist_cells())
         }
         Some(w) => {
-            let (a, b) = crop_range(dense.len(), fov, params.win_widths[w]);
+            let (a, b) = crop_range(dense.len(), fov, params.coarse.win_widths[w]);
             let n = crate::prep::prepare(&dense[a..b], false, params, pts, tan);
-            let k = params.win_cells();
+            let k = params.coarse.win_cells();
             crate::pgr::histogram_binned(
                 &pts[..n],
                 &tan[..n],
-                params.win_rho_bins as usize,
-                params.win_theta_bins as usize,
-                params.hist_rho_max,
+                params.coarse.win_rho_bins as usize,
+                params.coarse.win_theta_bins as usize,
+                params.coarse.hist_rho_max,
                 out,
             );
             (Some(w), k)
@@ -226,7 +226,7 @@ pub fn site_score<D: AsRef<[u8]>>(
         None => correlation(hist, db.hist(site)),
         Some(w) => {
             let mut best = -1.0f32;
-            for h in 0..db.params().win_headings as usize {
+            for h in 0..db.params().coarse.win_headings as usize {
                 let g = correlation(hist, db.window_hist(site, w, h));
                 if g > best {
                     best = g;

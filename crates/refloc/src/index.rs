@@ -45,7 +45,9 @@ impl ViewKind {
     fn from_raw(v: u32, params: &Params) -> Option<ViewKind> {
         match v {
             0 => Some(ViewKind::Full),
-            k if (k as usize) <= params.win_count() => Some(ViewKind::Window(k as usize - 1)),
+            k if (k as usize) <= params.coarse.win_count() => {
+                Some(ViewKind::Window(k as usize - 1))
+            }
             _ => None,
         }
     }
@@ -53,8 +55,8 @@ impl ViewKind {
     /// Histogram cells of this view's entries.
     pub fn cells(self, params: &Params) -> usize {
         match self {
-            ViewKind::Full => params.hist_cells(),
-            ViewKind::Window(_) => params.win_cells(),
+            ViewKind::Full => params.coarse.hist_cells(),
+            ViewKind::Window(_) => params.coarse.win_cells(),
         }
     }
 
@@ -62,7 +64,7 @@ impl ViewKind {
     fn entries_for(self, params: &Params, sites: usize) -> u64 {
         match self {
             ViewKind::Full => sites as u64,
-            ViewKind::Window(_) => sites as u64 * params.win_headings as u64,
+            ViewKind::Window(_) => sites as u64 * params.coarse.win_headings as u64,
         }
     }
 }
@@ -110,7 +112,7 @@ fn split<'a>(bytes: &'a [u8], params: &Params, sites: usize) -> Result<Parts<'a>
     let (header, rest) =
         IndexHeader::read_from_prefix(bytes).map_err(|_| "index header truncated")?;
     let nv = header.view_count.get() as usize;
-    if nv == 0 || nv > 1 + params.win_count() {
+    if nv == 0 || nv > 1 + params.coarse.win_count() {
         return Err("index view count");
     }
     let beam = header.beam.get() as usize;
@@ -410,7 +412,7 @@ mod tests {
         let buf = Aligned::new(&bytes);
         let db = RefDb::new(buf.bytes()).unwrap();
         let index = db.index().expect("the fixture has an index");
-        assert_eq!(index.kinds().count(), 1 + db.params().win_count());
+        assert_eq!(index.kinds().count(), 1 + db.params().coarse.win_count());
         for s in 0..db.site_count() {
             // The site's own histogram (and window 0, heading 3) as query.
             for (window, hist) in [(None, db.hist(s)), (Some(0), db.window_hist(s, 0, 3))] {

@@ -79,7 +79,10 @@ pub use localize::{
 };
 #[cfg(feature = "mmap")]
 pub use mmap::{map_file, open_mmap, OpenError};
-pub use params::{BadParam, Params, Selection, SensorModel};
+pub use params::{
+    BadParam, CoarseParams, Params, PrepParams, RefineParams, SelectParams, Selection, SensorModel,
+    SsmParams, VerifyParams,
+};
 pub use prior::Prior;
 
 #[cfg(test)]

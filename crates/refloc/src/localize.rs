@@ -286,15 +286,15 @@ struct Dims {
 
 impl Dims {
     fn new(params: &Params, max_beams: usize) -> Dims {
-        let points = params.max_points as usize;
+        let points = params.prep.max_points as usize;
         Dims {
             beams: max_beams,
             ref_beams: params.sensor.beams as usize,
             points,
-            hist: params.hist_cells().max(params.win_cells()),
-            cands: params.nc_max as usize,
-            tent: points * params.tentative_k as usize,
-            aff: params.affinity_cap as usize,
+            hist: params.coarse.hist_cells().max(params.coarse.win_cells()),
+            cands: params.coarse.nc_max as usize,
+            tent: points * params.ssm.tentative_k as usize,
+            aff: params.ssm.affinity_cap as usize,
         }
     }
 
@@ -533,7 +533,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         let params = self.params;
         let n = scan.len();
         let (valid, fov, wrap, range_max) = load_scan(scan, b.in_pts, b.in_ang, b.in_rng)?;
-        let needed = params.min_valid_points as usize;
+        let needed = params.prep.min_valid_points as usize;
         if valid < needed {
             return Err(LocalizeError::NotEnoughPoints { valid, needed });
         }
@@ -547,7 +547,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         ssm::descriptors(
             &b.q_pts[..nq],
             &b.q_tan[..nq],
-            params.desc_radius,
+            params.ssm.desc_radius,
             b.work.qdesc,
         );
         self.scan = Prepared {
@@ -595,9 +595,9 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         );
         self.nc = coarse::candidate_count(
             &b.top[..self.ranked],
-            p.nc_min as usize,
-            p.nc_max as usize,
-            p.nc_margin,
+            p.coarse.nc_min as usize,
+            p.coarse.nc_max as usize,
+            p.coarse.nc_margin,
         );
         self.nc
     }
@@ -637,7 +637,12 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         );
         let ref_wrap = prep::covers_full_turn(s.angle_increment, s.beams as usize);
         let nr = prep::prepare(&b.r_dense[..n], ref_wrap, p, b.r_pts, b.r_tan);
-        ssm::descriptors(&b.r_pts[..nr], &b.r_tan[..nr], p.desc_radius, b.work.rdesc);
+        ssm::descriptors(
+            &b.r_pts[..nr],
+            &b.r_tan[..nr],
+            p.ssm.desc_radius,
+            b.work.rdesc,
+        );
         let nq = self.scan.points;
         ssm::match_scans(
             &b.q_pts[..nq],
@@ -659,11 +664,18 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// pose itself when the database sets no refinement).
     pub fn refine_pose(&self, sensor: Pose2) -> Pose2 {
         let p = self.params;
-        if p.refine_iters == 0 {
+        if p.refine.refine_iters == 0 {
             return sensor;
         }
         let pts = &self.b.in_pts[..self.scan.beams];
-        refine::refine(&self.dm, pts, sensor, p.refine_iters, p.refine_max_dist).0
+        refine::refine(
+            &self.dm,
+            pts,
+            sensor,
+            p.refine.refine_iters,
+            p.refine.refine_max_dist,
+        )
+        .0
     }
 
     /// The refined sensor pose and its vicinity, from SSM's pose `sensor`:
@@ -674,8 +686,11 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     pub fn refine_if_promising(&self, sensor: Pose2) -> (Pose2, verify::Vicinity) {
         let p = self.params;
         let v = self.verify_pose(&sensor);
-        if p.refine_iters == 0
-            || verify::ratio(v.evidence(p.short_weight, p.occlusion_fit), v.pairs) < REFINE_GATE
+        if p.refine.refine_iters == 0
+            || verify::ratio(
+                v.evidence(p.verify.short_weight, p.verify.occlusion_fit),
+                v.pairs,
+            ) < REFINE_GATE
         {
             return (sensor, v);
         }
@@ -718,8 +733,8 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
                 long_beams: v.long,
                 pairs: v.pairs,
                 through_beams: v.through,
-                free_space_ok: v.free_space_ok(p.through_max) as u32,
-                evidence: v.evidence(p.short_weight, p.occlusion_fit),
+                free_space_ok: v.free_space_ok(p.verify.through_max) as u32,
+                evidence: v.evidence(p.verify.short_weight, p.verify.occlusion_fit),
                 ..cand
             };
             // A pose the prior rules out is no answer.
@@ -756,12 +771,12 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         let c = cands[best];
         let pose = Pose2::new(c.x, c.y, c.theta);
         let p = self.params;
-        let ambiguous = select::ambiguous(cands, &c, p.ambiguity_ratio);
+        let ambiguous = select::ambiguous(cands, &c, p.select.ambiguity_ratio);
         let model = self.db.decision();
         let decision = model.unwrap_or(Decision::DEFAULT);
         let mut hypotheses = [Hypothesis::default(); MAX_HYPOTHESES];
         let hypothesis_count =
-            select::hypotheses(cands, best, p.selection, &decision, &mut hypotheses);
+            select::hypotheses(cands, best, p.select.selection, &decision, &mut hypotheses);
         let confidence = select::capped_confidence(hypotheses[0].confidence, ambiguous);
         hypotheses[0].confidence = confidence;
         let accepted = match model {
@@ -773,7 +788,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
             &self.dm,
             &self.b.in_pts[..self.scan.beams],
             &sensor_pose,
-            p.refine_max_dist,
+            p.refine.refine_max_dist,
             self.db.frame().resolution * COVARIANCE_FLOOR_CELLS,
         )
         .map(|cov| {

@@ -51,9 +51,9 @@ pub fn histogram(pts: &[[f32; 2]], tan: &[[f32; 2]], params: &Params, out: &mut 
     histogram_binned(
         pts,
         tan,
-        params.hist_rho_bins as usize,
-        params.hist_theta_bins as usize,
-        params.hist_rho_max,
+        params.coarse.hist_rho_bins as usize,
+        params.coarse.hist_theta_bins as usize,
+        params.coarse.hist_rho_max,
         out,
     )
 }

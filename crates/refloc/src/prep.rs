@@ -50,11 +50,11 @@ pub fn prepare(
     let cap = out_pts
         .len()
         .min(out_tan.len())
-        .min(params.max_points as usize);
+        .min(params.prep.max_points as usize);
     if n < 3 || cap == 0 {
         return 0;
     }
-    let jd = params.jump_distance;
+    let jd = params.prep.jump_distance;
     let next = |i: usize| -> Option<usize> {
         if i + 1 < n {
             Some(i + 1)
@@ -95,7 +95,7 @@ pub fn prepare(
             length += libm::sqrtf(dist2(dense[i], dense[next(i).unwrap_or(i)]));
         }
     }
-    let spacing = params.resample_spacing.max(length / cap as f32 * 1.02);
+    let spacing = params.prep.resample_spacing.max(length / cap as f32 * 1.02);
     let sp2 = spacing * spacing;
 
     let mut count = 0;

@@ -189,10 +189,10 @@ impl Search {
     /// A search with the database's selection and early-stop settings.
     pub fn new(params: &Params) -> Search {
         Search {
-            selection: params.selection,
-            early_accept: params.early_accept,
-            early_min: params.early_min as usize,
-            ambiguity_ratio: params.ambiguity_ratio,
+            selection: params.select.selection,
+            early_accept: params.select.early_accept,
+            early_min: params.select.early_min as usize,
+            ambiguity_ratio: params.select.ambiguity_ratio,
             decision: None,
             best: None,
             floor: None,
@@ -363,7 +363,7 @@ mod tests {
         let best = cand(0.0, 0.0, 0.0, 80.0, 0);
         let twin = cand(10.0, 0.0, 0.0, 79.0, 0);
         let cands = [best, twin];
-        let amb = ambiguous(&cands, &best, params().ambiguity_ratio);
+        let amb = ambiguous(&cands, &best, params().select.ambiguity_ratio);
         assert!(amb);
         let mut h = [Hypothesis::default(); 5];
         let n = hypotheses(&cands, 0, Selection::Vicinity, &Decision::DEFAULT, &mut h);
@@ -411,9 +411,9 @@ mod tests {
 
     fn params() -> Params {
         let mut p = Params::defaults(360, 30.0);
-        p.selection = Selection::Vicinity;
-        p.early_accept = 0.9;
-        p.early_min = 0;
+        p.select.selection = Selection::Vicinity;
+        p.select.early_accept = 0.9;
+        p.select.early_min = 0;
         p
     }
 
@@ -582,7 +582,7 @@ mod tests {
         );
         // Nor does it fire with the early stop switched off.
         let mut off = params();
-        off.early_accept = 0.0;
+        off.select.early_accept = 0.0;
         let mut s = Search::new(&off).with_decision(Decision::DEFAULT);
         let mut c = vec![];
         for k in 0..2 * EARLY_CONFIDENCE_MIN {
@@ -611,12 +611,12 @@ mod tests {
         s.record(&c, 0.9);
         assert!(!s.stopping());
         let mut p = params();
-        p.early_accept = 0.0;
+        p.select.early_accept = 0.0;
         let mut s = Search::new(&p);
         s.record(&[cand(0.0, 0.0, 0.0, 90.0, 0)], 0.9);
         assert!(!s.stopping());
-        p.early_accept = 0.9;
-        p.selection = Selection::MatchScore;
+        p.select.early_accept = 0.9;
+        p.select.selection = Selection::MatchScore;
         let mut s = Search::new(&p);
         s.record(&[cand(0.0, 0.0, 0.0, 90.0, 0)], 0.9);
         assert!(!s.stopping());
@@ -625,8 +625,8 @@ mod tests {
     #[test]
     fn early_min_stops_once_enough_candidates_and_a_passing_best() {
         let mut p = params();
-        p.early_accept = 0.99;
-        p.early_min = 3;
+        p.select.early_accept = 0.99;
+        p.select.early_min = 3;
         let mut s = Search::new(&p);
         let mut cands = vec![];
         for k in 0..3 {

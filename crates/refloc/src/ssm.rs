@@ -133,7 +133,7 @@ pub fn match_scans(
     let nl = tentative(
         nq,
         nr,
-        params.tentative_k as usize,
+        params.ssm.tentative_k as usize,
         work.qdesc,
         work.rdesc,
         work.tent,
@@ -151,11 +151,11 @@ pub fn match_scans(
                 r_tan,
                 work.tent[a],
                 work.tent[b],
-                params.max_rho_dev,
+                params.ssm.max_rho_dev,
             ) else {
                 continue;
             };
-            let g = affinity(&params.w, drho, dth2);
+            let g = affinity(&params.ssm.w, drho, dth2);
             if g < AFFINITY_FLOOR {
                 continue;
             }
@@ -181,7 +181,7 @@ pub fn match_scans(
     for v in x.iter_mut() {
         *v = x0;
     }
-    for _ in 0..params.power_iters {
+    for _ in 0..params.ssm.power_iters {
         for v in y.iter_mut() {
             *v = 0.0;
         }
@@ -222,7 +222,7 @@ pub fn match_scans(
     let mut na = 0usize;
     for &o in order.iter() {
         let xv = x[o as usize];
-        if !(xv > 0.0) || xv < params.binarize_frac * xmax {
+        if !(xv > 0.0) || xv < params.ssm.binarize_frac * xmax {
             break;
         }
         let [i, ii] = work.tent[o as usize];
@@ -467,8 +467,8 @@ fn ransac(
     if n < 2 {
         return None;
     }
-    let thr2 = params.ransac_threshold * params.ransac_threshold;
-    let mut rng = params.ransac_seed as u64 ^ 0x9E37_79B9_7F4A_7C15;
+    let thr2 = params.ssm.ransac_threshold * params.ssm.ransac_threshold;
+    let mut rng = params.ssm.ransac_seed as u64 ^ 0x9E37_79B9_7F4A_7C15;
     let mut next = |m: usize| {
         // xorshift64*
         rng ^= rng >> 12;
@@ -477,7 +477,7 @@ fn ransac(
         ((rng.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 32) as usize) % m
     };
     let mut best: Option<(Pose2, u32, f32)> = None;
-    for _ in 0..params.ransac_iters {
+    for _ in 0..params.ssm.ransac_iters {
         let a = next(n);
         let b = next(n);
         if a == b {
@@ -487,7 +487,7 @@ fn ransac(
         let (r1, r2) = (r[acc[a][1] as usize], r[acc[b][1] as usize]);
         // The two pairs must agree in length and be long enough to fix a rotation.
         let (lq, lr) = (libm::sqrtf(dist2(q1, q2)), libm::sqrtf(dist2(r1, r2)));
-        if lq < 0.5 || libm::fabsf(lq - lr) > params.max_rho_dev {
+        if lq < 0.5 || libm::fabsf(lq - lr) > params.ssm.max_rho_dev {
             continue;
         }
         let pose = pose_from_pair(q1, q2, r1, r2);
@@ -507,7 +507,7 @@ fn ransac(
         pose = p;
         inliers = m;
     }
-    if inliers < params.min_inliers {
+    if inliers < params.ssm.min_inliers {
         return None;
     }
     Some((pose, inliers))

@@ -179,10 +179,10 @@ pub(crate) mod fixture {
             s.range_max,
             &mut dense,
         );
-        let m = p.max_points as usize;
+        let m = p.prep.max_points as usize;
         let (mut pts, mut tan) = (vec![[0f32; 2]; m], vec![[0f32; 2]; m]);
         let k = prep::prepare(&dense[..n], true, p, &mut pts, &mut tan);
-        let mut h = vec![0f32; p.hist_cells()];
+        let mut h = vec![0f32; p.coarse.hist_cells()];
         if pgr::histogram(&pts[..k], &tan[..k], p, &mut h) == 0 {
             let flat = 1.0 / h.len() as f32;
             h.iter_mut().for_each(|v| *v = flat);
@@ -304,9 +304,14 @@ pub(crate) mod fixture {
             leaf: U32::new(leaf),
             reserved: U32::new(0),
         };
-        let (nw, nh, wc) = (p.win_count(), p.win_headings as usize, p.win_cells());
+        let (nw, nh, wc) = (
+            p.coarse.win_count(),
+            p.coarse.win_headings as usize,
+            p.coarse.win_cells(),
+        );
         // (kind, entry histograms) per view.
-        let mut views: Vec<(u32, Vec<&[f32]>)> = vec![(0, hists.chunks(p.hist_cells()).collect())];
+        let mut views: Vec<(u32, Vec<&[f32]>)> =
+            vec![(0, hists.chunks(p.coarse.hist_cells()).collect())];
         for w in 0..nw {
             let mut v = Vec::new();
             for s in 0..sites {
@@ -377,13 +382,13 @@ pub(crate) mod fixture {
             &mut dense,
         );
         let mut wp = *p;
-        wp.hist_rho_bins = p.win_rho_bins;
-        wp.hist_theta_bins = p.win_theta_bins;
-        let m = p.max_points as usize;
+        wp.coarse.hist_rho_bins = p.coarse.win_rho_bins;
+        wp.coarse.hist_theta_bins = p.coarse.win_theta_bins;
+        let m = p.prep.max_points as usize;
         let (mut pts, mut tan) = (vec![[0f32; 2]; m], vec![[0f32; 2]; m]);
-        let nh = p.win_headings as usize;
+        let nh = p.coarse.win_headings as usize;
         let mut out = Vec::new();
-        for &width in &p.win_widths[..p.win_count()] {
+        for &width in &p.coarse.win_widths[..p.coarse.win_count()] {
             for h in 0..nh {
                 let first = h as f32 * 2.0 * core::f32::consts::PI / nh as f32 - width / 2.0;
                 let off = |k: usize| {
@@ -396,7 +401,7 @@ pub(crate) mod fixture {
                 let count = ((width / s.angle_increment).round() as usize).min(n);
                 let window: Vec<[f32; 2]> = (0..count).map(|j| dense[(start + j) % n]).collect();
                 let k = prep::prepare(&window, false, &wp, &mut pts, &mut tan);
-                let mut hist = vec![0f32; wp.hist_cells()];
+                let mut hist = vec![0f32; wp.coarse.hist_cells()];
                 if pgr::histogram(&pts[..k], &tan[..k], &wp, &mut hist) == 0 {
                     let flat = 1.0 / hist.len() as f32;
                     hist.iter_mut().for_each(|v| *v = flat);
@@ -463,11 +468,11 @@ fn world_points(pose: Pose2, beams: usize) -> Vec<[f32; 2]> {
 }
 
 fn points_histogram(dense: &[[f32; 2]], p: &Params) -> Vec<f32> {
-    let m = p.max_points as usize;
+    let m = p.prep.max_points as usize;
     let (mut pts, mut tan) = (vec![[0f32; 2]; m], vec![[0f32; 2]; m]);
     let n = prep::prepare(dense, true, p, &mut pts, &mut tan);
     assert!(n >= 50, "only {n} prepared points");
-    let mut h = vec![0f32; p.hist_cells()];
+    let mut h = vec![0f32; p.coarse.hist_cells()];
     let votes = pgr::histogram(&pts[..n], &tan[..n], p, &mut h);
     assert_eq!(votes, n * (n - 1));
     let sum: f32 = h.iter().sum();
@@ -606,8 +611,8 @@ fn synthetic_prepared(rng: &mut Prng) -> (Vec<[f32; 2]>, Vec<[f32; 2]>) {
 fn ransac_match_recovers_a_rigid_transform_from_exact_correspondences() {
     let p = fixture::params();
     let mut rng = Prng::new(3);
-    let np = p.max_points as usize;
-    let tent = np * p.tentative_k as usize;
+    let np = p.prep.max_points as usize;
+    let tent = np * p.ssm.tentative_k as usize;
     let (mut qdesc, mut rdesc) = (vec![0f32; np * DESC_LEN], vec![0f32; np * DESC_LEN]);
     let mut tbuf = vec![[0u16; 2]; tent];
     let mut aff = vec![Affinity::default(); AFFINITY_CAP];
@@ -620,8 +625,8 @@ fn ransac_match_recovers_a_rigid_transform_from_exact_correspondences() {
         let r_pts: Vec<[f32; 2]> = q_pts.iter().map(|&v| t.apply(v)).collect();
         let rot = Pose2::new(0.0, 0.0, t.theta);
         let r_tan: Vec<[f32; 2]> = q_tan.iter().map(|&v| rot.apply(v)).collect();
-        ssm::descriptors(&q_pts, &q_tan, p.desc_radius, &mut qdesc);
-        ssm::descriptors(&r_pts, &r_tan, p.desc_radius, &mut rdesc);
+        ssm::descriptors(&q_pts, &q_tan, p.ssm.desc_radius, &mut qdesc);
+        ssm::descriptors(&r_pts, &r_tan, p.ssm.desc_radius, &mut rdesc);
         let mut work = SsmWork {
             qdesc: &mut qdesc,
             rdesc: &mut rdesc,
@@ -635,7 +640,7 @@ fn ransac_match_recovers_a_rigid_transform_from_exact_correspondences() {
         };
         let m = ssm::match_scans(&q_pts, &q_tan, &r_pts, &r_tan, &p, &mut work)
             .expect("SSM finds the transform");
-        assert!(m.inliers >= p.min_inliers);
+        assert!(m.inliers >= p.ssm.min_inliers);
         assert!(
             (m.pose.x - t.x).abs() < 1e-4 && (m.pose.y - t.y).abs() < 1e-4,
             "pose {:?} vs truth {:?}",
@@ -933,14 +938,14 @@ fn localize_rejects_scans_without_enough_returns() {
     for (what, ranges) in &cases {
         match run(&db, &ranges_scan(ranges)) {
             Err(LocalizeError::NotEnoughPoints { valid: 0, needed }) => {
-                assert_eq!(needed, db.params().min_valid_points as usize, "{what}")
+                assert_eq!(needed, db.params().prep.min_valid_points as usize, "{what}")
             }
             other => panic!("{what}: {other:?}"),
         }
     }
     // Exactly one fewer valid return than needed.
     let (_, full) = truth_and_scan();
-    let need = db.params().min_valid_points as usize;
+    let need = db.params().prep.min_valid_points as usize;
     let mut few = vec![f32::NAN; n];
     for k in 0..need - 1 {
         few[k * 7] = full[k * 7];
@@ -1185,10 +1190,10 @@ fn verifier_tells_a_wall_seen_through_from_long_beams_ending_on_a_surface() {
     let db = RefDb::new(buf.bytes()).unwrap();
     let p = db.params();
     assert!(
-        p.through_max > 0.0 && p.through_run == 3,
+        p.verify.through_max > 0.0 && p.verify.through_run == 3,
         "the check is on by default"
     );
-    let run = p.through_run as usize;
+    let run = p.verify.through_run as usize;
     // From (10.5, 15.5) the inner wall (u = 20) is 0.95 m away along +u.
     let start = [10.5, 15.5];
     let hit = beams(&db, start, 0.95, run);
@@ -1267,7 +1272,7 @@ fn localize_does_not_accept_a_pose_that_sees_through_walls() {
     let mut scratch = vec![0u8; scratch_size(db.params(), ranges.len())];
     let l = localize(&db, &ranges_scan(&ranges), &mut scratch).unwrap();
     assert!(!l.accepted && !l.free_space_ok, "{l:?}");
-    assert!(l.through_beams as f32 > db.params().through_max * l.valid_points as f32);
+    assert!(l.through_beams as f32 > db.params().verify.through_max * l.valid_points as f32);
     assert!(l
         .candidates
         .iter()
@@ -1341,7 +1346,8 @@ fn only_a_pose_that_explains_part_of_the_scan_is_refined() {
     loc.prepare(&scan).unwrap();
     let max = |v: &crate::verify::Vicinity| crate::verify::HIT_SCORE * v.pairs as f32;
     let p = *db.params();
-    let evidence = |v: &crate::verify::Vicinity| v.evidence(p.short_weight, p.occlusion_fit);
+    let evidence =
+        |v: &crate::verify::Vicinity| v.evidence(p.verify.short_weight, p.verify.occlusion_fit);
     // A few centimetres and a degree off: refined towards the truth.
     let near = Pose2::new(truth.x + 0.04, truth.y - 0.03, truth.theta + 0.02);
     let before = loc.verify_pose(&near);
@@ -1362,4 +1368,26 @@ fn only_a_pose_that_explains_part_of_the_scan_is_refined() {
     let (kept, vk) = loc.refine_if_promising(wrong);
     assert_eq!(kept, wrong);
     assert_eq!(vk, w);
+}
+
+/// Each group reads its fields of the params record and writes them back:
+/// a record whose every 4-byte field holds a distinct non-zero value
+/// survives the trip, so no field is left out of a group's `write_record`.
+#[test]
+fn params_record_round_trips_every_field() {
+    use crate::format::ParamsRecord;
+    use zerocopy::{FromBytes, IntoBytes};
+    let words: Vec<u32> = (1..=(core::mem::size_of::<ParamsRecord>() / 4) as u32).collect();
+    for selection in [0u32, 1] {
+        let mut r = ParamsRecord::read_from_bytes(words.as_bytes()).unwrap();
+        r.selection = selection.into();
+        let p = Params::from_record(&r).unwrap();
+        assert_eq!(
+            p.to_record().as_bytes(),
+            r.as_bytes(),
+            "selection {selection}"
+        );
+    }
+    let d = Params::defaults(362, 30.0);
+    assert_eq!(Params::from_record(&d.to_record()), Ok(d));
 }

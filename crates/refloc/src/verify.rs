@@ -111,12 +111,12 @@ impl<'a> Verifier<'a, BitGrid<'a>> {
         Verifier {
             grid,
             frame: db.frame(),
-            dist: (p.through_max > 0.0).then(|| DistMap::of(db)),
+            dist: (p.verify.through_max > 0.0).then(|| DistMap::of(db)),
             range_max,
-            sigma_d: p.sigma_d,
-            accept_ratio: p.accept_ratio,
-            through_excess: p.through_excess,
-            through_run: p.through_run,
+            sigma_d: p.verify.sigma_d,
+            accept_ratio: p.verify.accept_ratio,
+            through_excess: p.verify.through_excess,
+            through_run: p.verify.through_run,
         }
     }
 }

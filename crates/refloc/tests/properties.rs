@@ -192,7 +192,7 @@ proptest! {
         rho_max in 1.0f32..20.0,
     ) {
         let p = Params::defaults(dense.len() as u32, 30.0);
-        let m = p.max_points as usize;
+        let m = p.prep.max_points as usize;
         let (mut pts, mut tan) = (vec![[0f32; 2]; m], vec![[0f32; 2]; m]);
         let n = prep::prepare(&dense, true, &p, &mut pts, &mut tan);
         prop_assume!(n >= 10);
@@ -201,7 +201,7 @@ proptest! {
         let turned: Vec<[f32; 2]> = tan.iter().map(|&u| turn(&t, u)).collect();
         let pos_tol = 2e-5;
         for (rb, tb, rmax) in [
-            (p.hist_rho_bins as usize, p.hist_theta_bins as usize, p.hist_rho_max),
+            (p.coarse.hist_rho_bins as usize, p.coarse.hist_theta_bins as usize, p.coarse.hist_rho_max),
             (rho_bins, theta_bins, rho_max),
         ] {
             let k = rb * tb;

@@ -25,9 +25,9 @@ fn params() -> Params {
 /// Full and window sections for `n` random sites.
 fn sections(n: usize, seed: u64) -> (Vec<u8>, Vec<u8>) {
     let p = params();
-    let hists = random_hists(n, p.hist_cells(), seed);
-    let per_site = p.win_count() * p.win_headings as usize;
-    let windows = random_hists(n * per_site, p.win_cells(), seed + 1);
+    let hists = random_hists(n, p.coarse.hist_cells(), seed);
+    let per_site = p.coarse.win_count() * p.coarse.win_headings as usize;
+    let windows = random_hists(n * per_site, p.coarse.win_cells(), seed + 1);
     (hists, windows)
 }
 
@@ -72,7 +72,7 @@ fn the_index_is_valid_and_holds_every_entry_once() {
     refloc::index::validate(&bytes, &p, n).expect("the runtime accepts it");
     let index = refloc::index::Index::new(&bytes, &p, n).unwrap();
     let kinds: Vec<_> = index.kinds().collect();
-    assert_eq!(kinds.len(), 1 + p.win_count());
+    assert_eq!(kinds.len(), 1 + p.coarse.win_count());
     // The leaves of each view partition its entries: every entry in one
     // leaf, once.
     use zerocopy::FromBytes;
@@ -120,7 +120,7 @@ fn the_search_finds_the_histogram_it_was_given() {
     };
     let bytes = build(&h, &w, &p, n, &opts).unwrap().unwrap();
     let index = refloc::index::Index::new(&bytes, &p, n).unwrap();
-    let k = p.hist_cells();
+    let k = p.coarse.hist_cells();
     let mut rng = Rng::new(9);
     let (mut found, mut visited) = (0, 0);
     for q in 0..200 {

@@ -314,7 +314,7 @@ impl<D: AsRef<[u8]>> RefDb<D> {
     /// PGR histogram of site `i` (normalized to sum 1).
     pub fn hist(&self, i: usize) -> &[f32] {
         let all = <[f32]>::ref_from_bytes(self.section(SectionKind::Hists)).unwrap_or(&[]);
-        let k = self.params.hist_cells();
+        let k = self.params.coarse.hist_cells();
         all.get(i.saturating_mul(k)..i.saturating_add(1).saturating_mul(k))
             .unwrap_or(&[])
     }
@@ -323,7 +323,11 @@ impl<D: AsRef<[u8]>> RefDb<D> {
     /// [`crate::coarse`]); empty when absent.
     pub fn window_hist(&self, i: usize, w: usize, h: usize) -> &[f32] {
         let p = &self.params;
-        let (nw, nh, k) = (p.win_count(), p.win_headings as usize, p.win_cells());
+        let (nw, nh, k) = (
+            p.coarse.win_count(),
+            p.coarse.win_headings as usize,
+            p.coarse.win_cells(),
+        );
         if w >= nw || h >= nh {
             return &[];
         }
@@ -560,10 +564,12 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
     )?;
     exact(
         SectionKind::Hists,
-        sz(n_sites, params.hist_cells() as u64 * 4),
+        sz(n_sites, params.coarse.hist_cells() as u64 * 4),
     )?;
-    let per_site_windows =
-        params.win_count() as u64 * params.win_headings as u64 * params.win_cells() as u64 * 4;
+    let per_site_windows = params.coarse.win_count() as u64
+        * params.coarse.win_headings as u64
+        * params.coarse.win_cells() as u64
+        * 4;
     exact(SectionKind::Windows, sz(n_sites, per_site_windows))?;
     let nb_len = sec(SectionKind::Neighbors).len();
     if nb_len % 4 != 0 {

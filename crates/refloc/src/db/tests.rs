@@ -1043,17 +1043,17 @@ fn exercise(db: &RefDb<&[u8]>, scans: &[Vec<f32>], scratch: &mut Vec<u8>) -> boo
         }
         if i < n {
             assert_eq!(db.scan(i).len(), db.params().sensor.beams as usize);
-            assert_eq!(db.hist(i).len(), db.params().hist_cells());
+            assert_eq!(db.hist(i).len(), db.params().coarse.hist_cells());
         } else {
             assert!(db.scan(i).is_empty() && db.hist(i).is_empty());
         }
     }
     let p = db.params();
     for i in 0..n + 1 {
-        for w in 0..p.win_count() + 1 {
-            for h in 0..p.win_headings as usize + 1 {
+        for w in 0..p.coarse.win_count() + 1 {
+            for h in 0..p.coarse.win_headings as usize + 1 {
                 let wh = db.window_hist(i, w, h);
-                assert!(wh.is_empty() || wh.len() == p.win_cells());
+                assert!(wh.is_empty() || wh.len() == p.coarse.win_cells());
             }
         }
     }
@@ -1072,7 +1072,7 @@ fn exercise(db: &RefDb<&[u8]>, scans: &[Vec<f32>], scratch: &mut Vec<u8>) -> boo
         });
         if let Ok(l) = localize(db, &scan, scratch) {
             any_ok = true;
-            assert!(l.candidates.len() <= db.params().nc_max as usize);
+            assert!(l.candidates.len() <= db.params().coarse.nc_max as usize);
             assert!((l.site as usize) < n);
         }
     }

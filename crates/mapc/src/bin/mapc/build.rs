@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use mapc::mapfile;
 use mapc::pipeline::{self, BuildConfig};
+use refloc::Selection;
 
 use crate::util::{fail_err, input_err, parse_triple, CliResult, Ui};
 
@@ -94,9 +95,9 @@ pub struct BuildOpts {
     /// Vicinity acceptance ratio: accept when M > 4.5 * N_P * ratio (paper: 0.5).
     #[arg(long, default_value_t = 0.5)]
     pub accept_ratio: f32,
-    /// Site selection: "vicinity" (largest vicinity score) or "match-score" (paper: largest E).
-    #[arg(long, default_value = "vicinity")]
-    pub selection: String,
+    /// Site selection rule.
+    #[arg(long, value_enum, default_value_t = SelectionArg(Selection::Vicinity))]
+    pub selection: SelectionArg,
     /// Gauss-Newton refinement iterations against the map (0: off, as in the paper).
     #[arg(long)]
     pub refine_iters: Option<u32>,
@@ -153,6 +154,27 @@ pub struct BuildOpts {
     pub db_limit: DbLimitArgs,
 }
 
+/// One value of `mapc build --selection`: a site selection rule, spelt as
+/// the manifest spells it ([`pipeline::selection_name`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SelectionArg(pub Selection);
+
+impl clap::ValueEnum for SelectionArg {
+    fn value_variants<'a>() -> &'a [Self] {
+        &[
+            SelectionArg(Selection::Vicinity),
+            SelectionArg(Selection::MatchScore),
+        ]
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        let help = match self.0 {
+            Selection::Vicinity => "largest vicinity score M",
+            Selection::MatchScore => "largest matching score E (the paper)",
+        };
+        Some(clap::builder::PossibleValue::new(pipeline::selection_name(self.0)).help(help))
+    }
+}
+
 /// The database-size limit of every command that compiles a map.
 #[derive(clap::Args, Debug, Clone)]
 pub struct DbLimitArgs {
@@ -188,7 +210,7 @@ impl BuildOpts {
             seed: self.seed,
             nc_max: self.nc_max.unwrap_or(d.nc_max),
             accept_ratio: self.accept_ratio,
-            selection: self.selection.clone(),
+            selection: self.selection.0,
             refine_iters: self.refine_iters.unwrap_or(d.refine_iters),
             tentative_k: self.tentative_k.unwrap_or(d.tentative_k),
             max_points: self.max_points.unwrap_or(d.max_points),

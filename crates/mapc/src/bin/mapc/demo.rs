@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use mapc::pipeline;
 
-use crate::build::{load_map, BuildOpts, DbLimitArgs, MapLimitArgs};
+use crate::build::{load_map, BuildOpts, DbLimitArgs, MapLimitArgs, SelectionArg};
 use crate::eval::Experiment;
 use crate::util::outln;
 use crate::util::{fail_err, input_err, CliResult, Ui};
@@ -58,7 +58,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         seed: a.seed,
         nc_max: None,
         accept_ratio: 0.5,
-        selection: "vicinity".into(),
+        selection: SelectionArg(refloc::Selection::Vicinity),
         refine_iters: None,
         tentative_k: None,
         max_points: None,

@@ -49,24 +49,24 @@ pub fn params_json(p: &refloc::Params) -> Value {
         "beams": s.beams, "angle_min_rad": s.angle_min, "angle_increment_rad": s.angle_increment,
         "range_min_m": s.range_min, "range_max_m": s.range_max,
         "sensor_offset": [s.offset.x, s.offset.y, s.offset.theta],
-        "resample_spacing_m": p.resample_spacing, "max_points": p.max_points, "jump_distance_m": p.jump_distance,
-        "hist_rho_bins": p.hist_rho_bins, "hist_theta_bins": p.hist_theta_bins, "hist_rho_max_m": p.hist_rho_max,
-        "nc_min": p.nc_min, "nc_max": p.nc_max, "nc_margin": p.nc_margin,
-        "desc_radius_m": p.desc_radius, "tentative_k": p.tentative_k, "max_rho_dev_m": p.max_rho_dev,
-        "logistic_w": p.w, "power_iters": p.power_iters, "binarize_frac": p.binarize_frac,
-        "ransac_iters": p.ransac_iters, "ransac_threshold_m": p.ransac_threshold, "ransac_seed": p.ransac_seed,
-        "min_inliers": p.min_inliers, "refine_iters": p.refine_iters, "refine_max_dist_m": p.refine_max_dist,
-        "sigma_d_m": p.sigma_d, "accept_ratio": p.accept_ratio, "min_valid_points": p.min_valid_points,
-        "selection": format!("{:?}", p.selection), "early_accept": p.early_accept, "early_min": p.early_min, "ambiguity_ratio": p.ambiguity_ratio, "affinity_cap": p.affinity_cap,
-        "window_widths_rad": p.win_widths, "window_headings": p.win_headings, "window_rho_bins": p.win_rho_bins, "window_theta_bins": p.win_theta_bins,
+        "resample_spacing_m": p.prep.resample_spacing, "max_points": p.prep.max_points, "jump_distance_m": p.prep.jump_distance,
+        "hist_rho_bins": p.coarse.hist_rho_bins, "hist_theta_bins": p.coarse.hist_theta_bins, "hist_rho_max_m": p.coarse.hist_rho_max,
+        "nc_min": p.coarse.nc_min, "nc_max": p.coarse.nc_max, "nc_margin": p.coarse.nc_margin,
+        "desc_radius_m": p.ssm.desc_radius, "tentative_k": p.ssm.tentative_k, "max_rho_dev_m": p.ssm.max_rho_dev,
+        "logistic_w": p.ssm.w, "power_iters": p.ssm.power_iters, "binarize_frac": p.ssm.binarize_frac,
+        "ransac_iters": p.ssm.ransac_iters, "ransac_threshold_m": p.ssm.ransac_threshold, "ransac_seed": p.ssm.ransac_seed,
+        "min_inliers": p.ssm.min_inliers, "refine_iters": p.refine.refine_iters, "refine_max_dist_m": p.refine.refine_max_dist,
+        "sigma_d_m": p.verify.sigma_d, "accept_ratio": p.verify.accept_ratio, "min_valid_points": p.prep.min_valid_points,
+        "selection": format!("{:?}", p.select.selection), "early_accept": p.select.early_accept, "early_min": p.select.early_min, "ambiguity_ratio": p.select.ambiguity_ratio, "affinity_cap": p.ssm.affinity_cap,
+        "window_widths_rad": p.coarse.win_widths, "window_headings": p.coarse.win_headings, "window_rho_bins": p.coarse.win_rho_bins, "window_theta_bins": p.coarse.win_theta_bins,
         "scratch_bytes_362": refloc::scratch_size(p, 362), "scratch_bytes_1081": refloc::scratch_size(p, 1081),
     });
     // Added in a second step: one json! call this long exceeds the macro recursion limit.
-    v["through_max"] = json!(p.through_max);
-    v["through_excess_m"] = json!(p.through_excess);
-    v["short_weight"] = json!(p.short_weight);
-    v["through_run"] = json!(p.through_run);
-    v["occlusion_fit"] = json!(p.occlusion_fit);
+    v["through_max"] = json!(p.verify.through_max);
+    v["through_excess_m"] = json!(p.verify.through_excess);
+    v["short_weight"] = json!(p.verify.short_weight);
+    v["through_run"] = json!(p.verify.through_run);
+    v["occlusion_fit"] = json!(p.verify.occlusion_fit);
     v
 }
 
@@ -89,7 +89,10 @@ fn index_json<D: AsRef<[u8]>>(db: &RefDb<D>) -> Value {
         .map(|k| match k {
             refloc::index::ViewKind::Full => "full".to_string(),
             refloc::index::ViewKind::Window(w) => {
-                format!("window {:.0} deg", db.params().win_widths[w].to_degrees())
+                format!(
+                    "window {:.0} deg",
+                    db.params().coarse.win_widths[w].to_degrees()
+                )
             }
         })
         .collect();

@@ -141,15 +141,15 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         }
         let hist = mapc::compile::scan_histogram(scan, &built.params);
         let (rb, tb) = (
-            built.params.hist_rho_bins as usize,
-            built.params.hist_theta_bins as usize,
+            built.params.coarse.hist_rho_bins as usize,
+            built.params.coarse.hist_theta_bins as usize,
         );
         let chart = plot::heatmap(
             &hist,
             rb,
             tb,
             (-180.0, 180.0),
-            (0.0, built.params.hist_rho_max as f64),
+            (0.0, built.params.coarse.hist_rho_max as f64),
         )
         .title(&format!("PGR histogram of site {k} (Fig. 9)"))
         .x_label("theta (deg)")
