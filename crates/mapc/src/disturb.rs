@@ -108,191 +108,282 @@ pub fn scan(
     lidar: &Lidar,
     rng: &mut Rng,
 ) -> Vec<f32> {
-    let xy = [sensor.x, sensor.y];
-    let nominal = |k: usize| sensor.theta + lidar.angle(k);
-    let exact = |g: &BitGrid<'_>| crate::sim::virtual_scan(g, frame, sensor, lidar);
+    let scene = Scene {
+        grid,
+        frame,
+        sensor,
+        lidar,
+    };
     match class {
-        Class::People => {
-            let n = 1 + rng.below(10) as usize;
-            let discs: Vec<([f32; 2], f32)> = (0..n)
-                .map(|_| {
-                    let (d, a) = (rng.range(0.6, 6.0) as f32, rng.range(-3.15, 3.15) as f32);
-                    let r = rng.range(0.2, 0.3) as f32;
-                    ([xy[0] + d * a.cos(), xy[1] + d * a.sin()], r)
-                })
-                .collect();
-            let mut ranges = exact(grid);
-            for (k, r) in ranges.iter_mut().enumerate() {
-                let dir = [nominal(k).cos(), nominal(k).sin()];
-                for (c, rad) in &discs {
-                    if let Some(t) = ray_disc(xy, dir, *c, *rad) {
-                        *r = r.min(t);
-                    }
-                }
+        Class::People => scene.people(rng),
+        Class::FurnitureAdded => scene.furniture_added(rng),
+        Class::FurnitureRemoved => scene.furniture_removed(rng),
+        Class::DoorsToggled => scene.doors_toggled(rng),
+        Class::Shifted => scene.shifted(rng),
+        Class::MissingReturns => scene.missing_returns(rng),
+        Class::RangeNoise => scene.range_noise(rng),
+        Class::AngularJitter => scene.angular_jitter(rng),
+        Class::MountError => scene.mount_error(rng),
+        Class::MotionDistortion => scene.motion_distortion(rng),
+    }
+}
+
+/// What a disturbed scan is taken in and with: the map's grid and frame,
+/// the true sensor pose and the lidar. One method per [`Class`], each
+/// drawing from the caller's [`Rng`] in a fixed order.
+struct Scene<'a, 'g> {
+    grid: &'a BitGrid<'g>,
+    frame: &'a MapFrame,
+    sensor: &'a Pose2,
+    lidar: &'a Lidar,
+}
+
+impl Scene<'_, '_> {
+    /// The sensor's position.
+    fn xy(&self) -> [f32; 2] {
+        [self.sensor.x, self.sensor.y]
+    }
+
+    /// The nominal world direction (rad) of beam `k`.
+    fn nominal(&self, k: usize) -> f32 {
+        self.sensor.theta + self.lidar.angle(k)
+    }
+
+    /// The undisturbed scan of the sensor in grid `g`.
+    fn exact(&self, g: &BitGrid<'_>) -> Vec<f32> {
+        crate::sim::virtual_scan(g, self.frame, self.sensor, self.lidar)
+    }
+
+    /// A world point `d` m from the sensor in direction `a` (rad).
+    fn around(&self, d: f32, a: f32) -> [f32; 2] {
+        let xy = self.xy();
+        [xy[0] + d * a.cos(), xy[1] + d * a.sin()]
+    }
+
+    /// The exact scan with each beam cut short by the added obstacles:
+    /// `hits(origin, dir)` gives the distances along the beam from the
+    /// sensor in direction `dir` at which it meets one.
+    fn exact_cut<I: Iterator<Item = f32>>(
+        &self,
+        hits: impl Fn([f32; 2], [f32; 2]) -> I,
+    ) -> Vec<f32> {
+        let xy = self.xy();
+        let mut ranges = self.exact(self.grid);
+        for (k, r) in ranges.iter_mut().enumerate() {
+            let dir = [self.nominal(k).cos(), self.nominal(k).sin()];
+            for t in hits(xy, dir) {
+                *r = r.min(t);
             }
-            ranges
         }
-        Class::FurnitureAdded => {
-            let n = 1 + rng.below(4) as usize;
-            let boxes: Vec<Box2> = (0..n)
-                .map(|_| {
-                    let half = [rng.range(0.2, 0.6) as f32, rng.range(0.2, 0.6) as f32];
-                    let reach = (half[0] * half[0] + half[1] * half[1]).sqrt() + 0.3;
-                    let (d, a) = (
-                        rng.range(reach.max(1.0) as f64, 6.0_f64.max(reach as f64 + 0.5)) as f32,
-                        rng.range(-3.15, 3.15) as f32,
-                    );
-                    Box2 {
-                        centre: [xy[0] + d * a.cos(), xy[1] + d * a.sin()],
-                        half,
-                        theta: rng.range(0.0, 3.15) as f32,
-                    }
-                })
-                .collect();
-            let mut ranges = exact(grid);
-            for (k, r) in ranges.iter_mut().enumerate() {
-                let dir = [nominal(k).cos(), nominal(k).sin()];
-                for b in &boxes {
-                    if let Some(t) = b.ray(xy, dir) {
-                        *r = r.min(t);
-                    }
+        ranges
+    }
+
+    /// [`Class::People`].
+    fn people(&self, rng: &mut Rng) -> Vec<f32> {
+        let n = 1 + rng.below(10) as usize;
+        let discs: Vec<([f32; 2], f32)> = (0..n)
+            .map(|_| {
+                let (d, a) = (rng.range(0.6, 6.0) as f32, rng.range(-3.15, 3.15) as f32);
+                let r = rng.range(0.2, 0.3) as f32;
+                (self.around(d, a), r)
+            })
+            .collect();
+        let discs = &discs;
+        self.exact_cut(move |xy, dir| {
+            discs
+                .iter()
+                .filter_map(move |(c, rad)| ray_disc(xy, dir, *c, *rad))
+        })
+    }
+
+    /// [`Class::FurnitureAdded`].
+    fn furniture_added(&self, rng: &mut Rng) -> Vec<f32> {
+        let n = 1 + rng.below(4) as usize;
+        let boxes: Vec<Box2> = (0..n)
+            .map(|_| {
+                let half = [rng.range(0.2, 0.6) as f32, rng.range(0.2, 0.6) as f32];
+                let reach = (half[0] * half[0] + half[1] * half[1]).sqrt() + 0.3;
+                let (d, a) = (
+                    rng.range(reach.max(1.0) as f64, 6.0_f64.max(reach as f64 + 0.5)) as f32,
+                    rng.range(-3.15, 3.15) as f32,
+                );
+                Box2 {
+                    centre: self.around(d, a),
+                    half,
+                    theta: rng.range(0.0, 3.15) as f32,
                 }
+            })
+            .collect();
+        let boxes = &boxes;
+        self.exact_cut(move |xy, dir| boxes.iter().filter_map(move |b| b.ray(xy, dir)))
+    }
+
+    /// The scan in an edited copy of the map's world: `edit` is tried up
+    /// to 400 times, until `wanted` tries have changed it (returned true).
+    fn edited(&self, wanted: usize, mut edit: impl FnMut(&mut Cells) -> bool) -> Vec<f32> {
+        let mut world = Cells::of(self.grid);
+        let mut done = 0;
+        for _ in 0..400 {
+            if done == wanted {
+                break;
             }
-            ranges
+            done += edit(&mut world) as usize;
         }
-        Class::FurnitureRemoved => {
-            let mut world = Cells::of(grid);
+        world.cast(self.grid, |g| self.exact(g))
+    }
+
+    /// [`Class::FurnitureRemoved`].
+    fn furniture_removed(&self, rng: &mut Rng) -> Vec<f32> {
+        let (grid, frame) = (self.grid, self.frame);
+        let blocks = 1 + rng.below(3) as usize;
+        // Look for obstacle cells near the sensor to erase around.
+        self.edited(blocks, |world| {
             let (w, h) = (world.w as i64, world.h as i64);
-            let blocks = 1 + rng.below(3) as usize;
-            let mut erased = 0;
-            // Look for obstacle cells near the sensor to erase around.
-            for _ in 0..400 {
-                if erased == blocks {
-                    break;
-                }
-                let (d, a) = (rng.range(0.5, 8.0) as f32, rng.range(-3.15, 3.15) as f32);
-                let Some((cx, cy)) = world.cell(frame, [xy[0] + d * a.cos(), xy[1] + d * a.sin()])
-                else {
-                    continue;
-                };
-                if !refloc::raycast::Occupancy::blocked(grid, cx, cy) {
-                    continue;
-                }
-                let (cx, cy) = (cx as i64, cy as i64);
-                let half = (rng.range(0.25, 0.5) as f32 / frame.resolution).ceil() as i64;
-                for y in (cy - half).max(0)..(cy + half + 1).min(h) {
-                    for x in (cx - half).max(0)..(cx + half + 1).min(w) {
-                        world.set(x as u32, y as u32, false);
-                    }
-                }
-                erased += 1;
+            let (d, a) = (rng.range(0.5, 8.0) as f32, rng.range(-3.15, 3.15) as f32);
+            let Some((cx, cy)) = world.cell(frame, self.around(d, a)) else {
+                return false;
+            };
+            if !refloc::raycast::Occupancy::blocked(grid, cx, cy) {
+                return false;
             }
-            world.cast(grid, exact)
-        }
-        Class::DoorsToggled => {
-            let mut world = Cells::of(grid);
-            let toggles = 1 + rng.below(3) as usize;
-            let mut done = 0;
-            for _ in 0..400 {
-                if done == toggles {
-                    break;
+            let (cx, cy) = (cx as i64, cy as i64);
+            let half = (rng.range(0.25, 0.5) as f32 / frame.resolution).ceil() as i64;
+            for y in (cy - half).max(0)..(cy + half + 1).min(h) {
+                for x in (cx - half).max(0)..(cx + half + 1).min(w) {
+                    world.set(x as u32, y as u32, false);
                 }
-                let (d, a) = (rng.range(1.0, 8.0) as f32, rng.range(-3.15, 3.15) as f32);
-                let p = [xy[0] + d * a.cos(), xy[1] + d * a.sin()];
-                let across = rng.range(0.0, std::f64::consts::PI) as f32;
-                let toggled = if world.blocked_at(frame, p) {
-                    open_door(&mut world, grid, frame, p, across, rng)
+            }
+            true
+        })
+    }
+
+    /// [`Class::DoorsToggled`].
+    fn doors_toggled(&self, rng: &mut Rng) -> Vec<f32> {
+        let (grid, frame) = (self.grid, self.frame);
+        let toggles = 1 + rng.below(3) as usize;
+        self.edited(toggles, |world| {
+            let (d, a) = (rng.range(1.0, 8.0) as f32, rng.range(-3.15, 3.15) as f32);
+            let p = self.around(d, a);
+            let across = rng.range(0.0, std::f64::consts::PI) as f32;
+            if world.blocked_at(frame, p) {
+                open_door(world, grid, frame, p, across, rng)
+            } else {
+                close_door(world, grid, frame, self.xy(), p, across)
+            }
+        })
+    }
+
+    /// [`Class::Shifted`].
+    fn shifted(&self, rng: &mut Rng) -> Vec<f32> {
+        let (sensor, lidar) = (self.sensor, self.lidar);
+        let shift = Pose2::new(
+            rng.range(-0.05, 0.05) as f32,
+            rng.range(-0.05, 0.05) as f32,
+            rng.range(-0.5, 0.5).to_radians() as f32,
+        );
+        let scale = 1.0 + rng.range(-0.003, 0.003) as f32;
+        // The sensor stands in the world at `sensor`; around it the world
+        // is the map moved by `shift` (about the sensor, so the local
+        // disagreement is at most the shift) and scaled: cast in the map
+        // from where the sensor is in map coordinates, ranges scaled.
+        let in_map = Pose2::new(
+            sensor.x - shift.x,
+            sensor.y - shift.y,
+            sensor.theta - shift.theta,
+        );
+        (0..lidar.beams)
+            .map(|k| {
+                let a = in_map.theta + lidar.angle(k);
+                let origin = [in_map.x, in_map.y];
+                beam(self.grid, self.frame, origin, a, lidar.range_max / scale) * scale
+            })
+            .map(|r| {
+                if r > lidar.range_max {
+                    f32::INFINITY
                 } else {
-                    close_door(&mut world, grid, frame, xy, p, across)
-                };
-                done += toggled as usize;
-            }
-            world.cast(grid, exact)
-        }
-        Class::Shifted => {
-            let shift = Pose2::new(
-                rng.range(-0.05, 0.05) as f32,
-                rng.range(-0.05, 0.05) as f32,
-                rng.range(-0.5, 0.5).to_radians() as f32,
-            );
-            let scale = 1.0 + rng.range(-0.003, 0.003) as f32;
-            // The sensor stands in the world at `sensor`; around it the world
-            // is the map moved by `shift` (about the sensor, so the local
-            // disagreement is at most the shift) and scaled: cast in the map
-            // from where the sensor is in map coordinates, ranges scaled.
-            let in_map = Pose2::new(
-                sensor.x - shift.x,
-                sensor.y - shift.y,
-                sensor.theta - shift.theta,
-            );
-            (0..lidar.beams)
-                .map(|k| {
-                    let a = in_map.theta + lidar.angle(k);
-                    let origin = [in_map.x, in_map.y];
-                    beam(grid, frame, origin, a, lidar.range_max / scale) * scale
-                })
-                .map(|r| {
-                    if r > lidar.range_max {
-                        f32::INFINITY
-                    } else {
-                        r
-                    }
-                })
-                .collect()
-        }
-        Class::MissingReturns => {
-            let mut ranges = exact(grid);
-            let n = ranges.len();
-            if n == 0 {
-                return ranges;
-            }
-            for _ in 0..1 + rng.below(4) {
-                let len = (5 + rng.below(26)) as usize;
-                let start = rng.below(n as u64) as usize;
-                for r in &mut ranges[start..(start + len).min(n)] {
-                    *r = f32::INFINITY;
+                    r
                 }
-            }
-            for r in ranges.iter_mut() {
-                if rng.uniform() < 0.05 {
-                    *r = f32::INFINITY;
-                }
-            }
-            ranges
+            })
+            .collect()
+    }
+
+    /// [`Class::MissingReturns`].
+    fn missing_returns(&self, rng: &mut Rng) -> Vec<f32> {
+        let mut ranges = self.exact(self.grid);
+        let n = ranges.len();
+        if n == 0 {
+            return ranges;
         }
-        Class::RangeNoise => {
-            let mut ranges = exact(grid);
-            for r in ranges.iter_mut().filter(|r| r.is_finite()) {
-                let sigma = 0.01 + 0.01 * *r;
-                *r = (*r + sigma * rng.normal() as f32).clamp(1e-3, lidar.range_max);
+        for _ in 0..1 + rng.below(4) {
+            let len = (5 + rng.below(26)) as usize;
+            let start = rng.below(n as u64) as usize;
+            for r in &mut ranges[start..(start + len).min(n)] {
+                *r = f32::INFINITY;
             }
-            ranges
         }
-        Class::AngularJitter => (0..lidar.beams)
+        for r in ranges.iter_mut() {
+            if rng.uniform() < 0.05 {
+                *r = f32::INFINITY;
+            }
+        }
+        ranges
+    }
+
+    /// [`Class::RangeNoise`].
+    fn range_noise(&self, rng: &mut Rng) -> Vec<f32> {
+        let mut ranges = self.exact(self.grid);
+        for r in ranges.iter_mut().filter(|r| r.is_finite()) {
+            let sigma = 0.01 + 0.01 * *r;
+            *r = (*r + sigma * rng.normal() as f32).clamp(1e-3, self.lidar.range_max);
+        }
+        ranges
+    }
+
+    /// [`Class::AngularJitter`].
+    fn angular_jitter(&self, rng: &mut Rng) -> Vec<f32> {
+        let lidar = self.lidar;
+        (0..lidar.beams)
             .map(|k| {
                 let jitter = (0.2f64.to_radians() * rng.normal()) as f32;
-                beam(grid, frame, xy, nominal(k) + jitter, lidar.range_max)
+                let a = self.nominal(k) + jitter;
+                beam(self.grid, self.frame, self.xy(), a, lidar.range_max)
             })
-            .collect(),
-        Class::MountError => {
-            let [dp, dth] = MOUNT_ERROR.map(f64::from);
-            let err = Pose2::new(
-                rng.range(-dp, dp) as f32,
-                rng.range(-dp, dp) as f32,
-                rng.range(-dth, dth) as f32,
-            );
-            crate::sim::virtual_scan(grid, frame, &sensor.compose(&err), lidar)
-        }
-        Class::MotionDistortion => {
-            let omega = rng.range(-1.0, 1.0) as f32;
-            let n = lidar.beams.max(1) as f32;
-            (0..lidar.beams)
-                .map(|k| {
-                    let t = (k as f32 / n - 0.5) * SWEEP_S;
-                    beam(grid, frame, xy, nominal(k) + omega * t, lidar.range_max)
-                })
-                .collect()
-        }
+            .collect()
+    }
+
+    /// [`Class::MountError`].
+    fn mount_error(&self, rng: &mut Rng) -> Vec<f32> {
+        let [dp, dth] = MOUNT_ERROR.map(f64::from);
+        let err = Pose2::new(
+            rng.range(-dp, dp) as f32,
+            rng.range(-dp, dp) as f32,
+            rng.range(-dth, dth) as f32,
+        );
+        crate::sim::virtual_scan(
+            self.grid,
+            self.frame,
+            &self.sensor.compose(&err),
+            self.lidar,
+        )
+    }
+
+    /// [`Class::MotionDistortion`].
+    fn motion_distortion(&self, rng: &mut Rng) -> Vec<f32> {
+        let lidar = self.lidar;
+        let omega = rng.range(-1.0, 1.0) as f32;
+        let n = lidar.beams.max(1) as f32;
+        (0..lidar.beams)
+            .map(|k| {
+                let t = (k as f32 / n - 0.5) * SWEEP_S;
+                beam(
+                    self.grid,
+                    self.frame,
+                    self.xy(),
+                    self.nominal(k) + omega * t,
+                    lidar.range_max,
+                )
+            })
+            .collect()
     }
 }
 

@@ -36,6 +36,8 @@ pub struct Args {
     pub db_limit: DbLimitArgs,
 }
 
+/// `mapc demo`: compiles the map into `--out`, evaluates it there and
+/// prints the summary.
 pub fn run(a: Args, ui: &Ui) -> CliResult {
     if !a.map.exists() {
         return Err(input_err(anyhow::anyhow!(
@@ -45,9 +47,69 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     }
     std::fs::create_dir_all(&a.out)
         .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", a.out.display())))?;
+    let compiled = compile(&a)?;
+    let quiet = Ui {
+        quiet: true,
+        tty: ui.tty,
+    };
+    let report = crate::eval::evaluate(&eval_args(&a, &compiled.db_path), &quiet)?;
+    let rp = a.out.join("report.json");
+    std::fs::write(
+        &rp,
+        serde_json::to_string_pretty(&report).unwrap_or_default(),
+    )
+    .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", rp.display())))?;
+    print_summary(&a, &compiled, &report);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The demo's map compiled into `--out`.
+struct Compiled {
+    /// The map it was compiled from.
+    src: mapc::mapfile::MapSource,
+    built: pipeline::BuildOutput,
+    /// Where the database is.
+    db_path: PathBuf,
+    /// The database's size (bytes).
+    size: u64,
+    /// Time of loading, compiling and writing (s).
+    build_s: f64,
+}
+
+/// Loads `--map`, compiles it with the demo's options and writes the
+/// database into `--out` as `<map stem>.refdb`.
+fn compile(a: &Args) -> Result<Compiled, crate::util::CliError> {
     let t0 = Instant::now();
     let src = load_map(&a.map, None, None, &a.limits).map_err(input_err)?;
-    let opts = BuildOpts {
+    let opts = build_opts(a);
+    let built = pipeline::build(&src, &opts.config()).map_err(|e| input_err(anyhow::anyhow!(e)))?;
+    let stem = a
+        .map
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "map".into());
+    let db_path = a.out.join(format!("{stem}.refdb"));
+    let secs: Vec<_> = built
+        .sections
+        .iter()
+        .map(|(k, b)| (*k, b.as_slice()))
+        .collect();
+    let size = mapc::writer::write_refdb(&db_path, &secs)
+        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", db_path.display())))?;
+    let build_s = t0.elapsed().as_secs_f64();
+    Ok(Compiled {
+        src,
+        built,
+        db_path,
+        size,
+        build_s,
+    })
+}
+
+/// The options `mapc build` would take for the demo: the defaults with
+/// `--seed` and the database limits of the arguments.
+fn build_opts(a: &Args) -> BuildOpts {
+    BuildOpts {
         beams: 362,
         range_max: 30.0,
         sensor_offset: None,
@@ -77,24 +139,15 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         index_leaves: mapc::index::IndexOptions::default().leaves,
         index_leaf_size: mapc::index::IndexOptions::default().leaf_size,
         db_limit: a.db_limit.clone(),
-    };
-    let built = pipeline::build(&src, &opts.config()).map_err(|e| input_err(anyhow::anyhow!(e)))?;
-    let stem = a
-        .map
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "map".into());
-    let db_path = a.out.join(format!("{stem}.refdb"));
-    let secs: Vec<_> = built
-        .sections
-        .iter()
-        .map(|(k, b)| (*k, b.as_slice()))
-        .collect();
-    let size = mapc::writer::write_refdb(&db_path, &secs)
-        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", db_path.display())))?;
-    let build_s = t0.elapsed().as_secs_f64();
-    let eval_args = crate::eval::Args {
-        db: db_path.clone(),
+    }
+}
+
+/// The `mapc eval` the demo runs on the database at `db_path`: E4
+/// static, dynamic and dynamic-swap with `--poses` scans each, and E1,
+/// report and figures into `--out`.
+fn eval_args(a: &Args, db_path: &std::path::Path) -> crate::eval::Args {
+    crate::eval::Args {
+        db: db_path.to_path_buf(),
         poses: a.poses,
         seed: a.seed,
         clearance: 0.3,
@@ -122,19 +175,13 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         tol_false_accept: 0.01,
         tol_error_factor: 1.5,
         limits: a.limits.clone(),
-    };
-    let quiet = Ui {
-        quiet: true,
-        tty: ui.tty,
-    };
-    let report = crate::eval::evaluate(&eval_args, &quiet)?;
-    let rp = a.out.join("report.json");
-    std::fs::write(
-        &rp,
-        serde_json::to_string_pretty(&report).unwrap_or_default(),
-    )
-    .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", rp.display())))?;
-    let g = &src.grid;
+    }
+}
+
+/// The summary on stdout: the map, the database, a table of the E4 runs
+/// and the E1 result of `report`.
+fn print_summary(a: &Args, c: &Compiled, report: &serde_json::Value) {
+    let g = &c.src.grid;
     outln!(
         "refloc demo: {} ({} x {} cells, {:.1} m x {:.1} m)",
         a.map.display(),
@@ -145,13 +192,27 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     );
     outln!(
         "compiled {} sites, coverage {:.2}%, {} bytes in {:.2} s -> {}",
-        built.sites.len(),
-        100.0 * built.coverage.fraction,
-        size,
-        build_s,
-        db_path.display()
+        c.built.sites.len(),
+        100.0 * c.built.coverage.fraction,
+        c.size,
+        c.build_s,
+        c.db_path.display()
     );
     outln!();
+    print_table(report);
+    if let Some(e1) = report.get("e1") {
+        outln!();
+        outln!(
+            "scan-to-scan SSM (E1, {} trials): sd x {:.2} mm, y {:.2} mm, theta {:.3} deg (paper: 10.51 mm, 7.99 mm, 0.09 deg)",
+            e1["trials"], e1["sd_mm_mm_deg"][0].as_f64().unwrap_or(f64::NAN), e1["sd_mm_mm_deg"][1].as_f64().unwrap_or(f64::NAN), e1["sd_mm_mm_deg"][2].as_f64().unwrap_or(f64::NAN)
+        );
+    }
+    outln!();
+    outln!("figures and report in {}/", a.out.display());
+}
+
+/// The table of the report's summaries, one row a run.
+fn print_table(report: &serde_json::Value) {
     outln!(
         "{:<14} {:>6} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
         "scans",
@@ -179,14 +240,4 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             );
         }
     }
-    if let Some(e1) = report.get("e1") {
-        outln!();
-        outln!(
-            "scan-to-scan SSM (E1, {} trials): sd x {:.2} mm, y {:.2} mm, theta {:.3} deg (paper: 10.51 mm, 7.99 mm, 0.09 deg)",
-            e1["trials"], e1["sd_mm_mm_deg"][0].as_f64().unwrap_or(f64::NAN), e1["sd_mm_mm_deg"][1].as_f64().unwrap_or(f64::NAN), e1["sd_mm_mm_deg"][2].as_f64().unwrap_or(f64::NAN)
-        );
-    }
-    outln!();
-    outln!("figures and report in {}/", a.out.display());
-    Ok(ExitCode::SUCCESS)
 }

@@ -4,7 +4,6 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use mapc::eval::{self, ScanSpec, Summary, Tolerance, Trial};
 use mapc::figures;
@@ -271,144 +270,185 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
             "--fov must be in (0, 360] degrees and --beams at least 3"
         )));
     }
-    let want = |e: Experiment| {
-        a.experiments.contains(&e)
-            || (matches!(e, Experiment::Disturbance(_))
-                && a.experiments.contains(&Experiment::Disturbances))
-    };
-    let spec = |noise: f32, short: usize, swap: usize| ScanSpec {
-        beams: a.beams,
-        fov,
-        range_max: a.range_max,
-        noise,
-        short_outliers: short,
-        swap_outliers: swap,
-        disturbance: None,
-        prior_radius: a.prior_radius,
-        prior_heading_tol: a.prior_heading_tol.to_radians(),
-    };
-    let poses = eval::sample_poses(&db, a.poses, a.clearance, a.seed);
+    let ev = Evaluation { a, ui, db, fov };
+    let poses = eval::sample_poses(&ev.db, a.poses, a.clearance, a.seed);
     if poses.is_empty() {
         return Err(input_err(anyhow::anyhow!(
             "no free cell with clearance {} m to sample poses from",
             a.clearance
         )));
     }
-    let mut summaries: BTreeMap<String, Value> = BTreeMap::new();
-    let mut report = json!({
-        "db": a.db.display().to_string(),
-        "config": {"poses": a.poses, "seed": a.seed, "clearance_m": a.clearance, "beams": a.beams, "fov_deg": a.fov,
-                   "range_max_m": a.range_max, "noise_m": a.noise, "outliers": a.outliers},
-        "sites": db.site_count(),
-    });
-    let runs: Vec<(&str, ScanSpec)> = [
-        (Experiment::Static, spec(0.0, 0, 0)),
-        (Experiment::Dynamic, spec(a.noise, a.outliers, 0)),
-        (Experiment::DynamicSwap, spec(a.noise, 0, a.outliers)),
-    ]
-    .into_iter()
-    .chain(mapc::disturb::Class::ALL.map(|c| {
-        (
-            Experiment::Disturbance(c),
-            ScanSpec {
-                disturbance: Some(c),
-                ..spec(0.0, 0, 0)
-            },
-        )
-    }))
-    .filter(|&(e, _)| want(e))
-    .map(|(e, sp)| (e.name(), sp))
-    .collect();
-    let mut static_trials: Option<Vec<Trial>> = None;
-    for (name, sp) in runs {
-        if let Some(dir) = &a.dump {
-            dump_e4(&db, &poses, &sp, a.seed, dir, name)?;
-        }
-        let pb = ui.progress(poses.len() as u64, name);
-        let tick = || pb.inc(1);
-        let trials = eval::run_e4(&db, &poses, &sp, a.seed, None, &tick);
-        pb.finish_and_clear();
-        let s = eval::summarize(&trials);
-        ui.note(&fmt_summary(name, &s));
-        if !a.no_figures {
-            let _ = std::fs::create_dir_all(&a.out);
-            let f = |n: &str| a.out.join(format!("{name}-{n}.png"));
-            let r = figures::poses_figure(
-                &db,
-                &trials,
-                &format!("E4 {name}: true vs estimated poses"),
-                300,
-                &f("poses"),
-            )
-            .and_then(|_| {
-                figures::error_figure(
-                    &trials,
-                    &format!("E4 {name}: pose errors (Fig. 12)"),
-                    &f("errors"),
-                )
-            })
-            .and_then(|_| {
-                figures::rank_figure(
-                    &trials,
-                    &format!("E5 {name}: coarse rank of the correct site (Fig. 16)"),
-                    &f("ranks"),
-                )
-            });
-            if let Err(e) = r {
-                ui.note(&format!("warning: figures not written: {e}"));
-            }
-        }
-        let ranks: Vec<usize> = trials.iter().filter_map(|t| t.correct_rank).collect();
-        let within =
-            |k: usize| ranks.iter().filter(|&&r| r < k).count() as f64 / ranks.len().max(1) as f64;
-        report[format!("e5_{name}")] = json!({
-            "with_site_in_sight": ranks.len(),
-            "rank_within": {"1": within(1), "5": within(5), "10": within(10), "20": within(20), "30": within(30)},
-            "rank_histogram": (0..30).map(|k| ranks.iter().filter(|&&r| r == k).count()).collect::<Vec<_>>(),
-        });
-        let failures: Vec<&Trial> = trials.iter().filter(|t| !t.correct()).take(50).collect();
-        let ratios = |ok: bool| -> Vec<f64> {
-            let mut v: Vec<f64> = trials
-                .iter()
-                .filter(|t| t.est.is_some() && t.correct() == ok)
-                .map(|t| t.vicinity_ratio)
-                .collect();
-            v.sort_by(|a, b| a.total_cmp(b));
-            v
-        };
-        let (good, bad) = (ratios(true), ratios(false));
-        let pct = |v: &[f64], q: f64| {
-            v.get(((v.len() as f64 - 1.0) * q).round() as usize)
-                .copied()
-                .unwrap_or(f64::NAN)
-        };
-        let mut longs: Vec<f64> = trials
-            .iter()
-            .filter(|t| t.correct())
-            .map(|t| t.long_ratio)
-            .collect();
-        longs.sort_by(|a, b| a.total_cmp(b));
-        report[format!("long_ratio_correct_{name}")] = json!([
-            pct(&longs, 0.5),
-            pct(&longs, 0.95),
-            pct(&longs, 0.99),
-            longs.last().copied()
-        ]);
-        report[format!("vicinity_{name}")] = json!({
-            "correct_p01_p05_p50": [pct(&good, 0.01), pct(&good, 0.05), pct(&good, 0.5)],
-            "wrong_p50_p95_p99_max": [pct(&bad, 0.5), pct(&bad, 0.95), pct(&bad, 0.99), bad.last().copied().unwrap_or(f64::NAN)],
-        });
-        report[format!("failures_{name}")] = serde_json::to_value(&failures).unwrap_or(Value::Null);
-        summaries.insert(
+    let mut report = Report {
+        json: json!({
+            "db": a.db.display().to_string(),
+            "config": {"poses": a.poses, "seed": a.seed, "clearance_m": a.clearance, "beams": a.beams, "fov_deg": a.fov,
+                       "range_max_m": a.range_max, "noise_m": a.noise, "outliers": a.outliers},
+            "sites": ev.db.site_count(),
+        }),
+        summaries: BTreeMap::new(),
+    };
+    for (name, sp) in ev.e4_runs() {
+        ev.e4(name, &sp, &poses, &mut report)?;
+    }
+    if ev.want(Experiment::WrongMap) {
+        ev.wrong_map(&mut report)?;
+    }
+    if ev.want(Experiment::E1) {
+        ev.e1(&mut report)?;
+    }
+    if ev.want(Experiment::E2) {
+        ev.e2(&mut report);
+    }
+    Ok(report.finish())
+}
+
+/// The report of a run as it is assembled: the JSON object and the
+/// summaries of the runs that have one, keyed by run name (they go in as
+/// `summaries` at the end, the part `--check` compares).
+struct Report {
+    json: Value,
+    summaries: BTreeMap<String, Value>,
+}
+
+impl Report {
+    /// Records the summary of run `name`.
+    fn summary(&mut self, name: &str, s: &Summary) {
+        self.summaries.insert(
             name.to_string(),
-            serde_json::to_value(&s).unwrap_or(Value::Null),
+            serde_json::to_value(s).unwrap_or(Value::Null),
         );
-        if name == "static" {
-            static_trials = Some(trials);
+    }
+
+    /// The complete report.
+    fn finish(mut self) -> Value {
+        self.json["summaries"] = serde_json::to_value(&self.summaries).unwrap_or(Value::Null);
+        self.json
+    }
+}
+
+/// One `mapc eval` run: its arguments, the database and the checked field
+/// of view (rad). Each experiment is a method that adds its part to the
+/// [`Report`].
+struct Evaluation<'a> {
+    a: &'a Args,
+    ui: &'a Ui,
+    db: refloc::RefDb<crate::util::DbBytes>,
+    fov: f32,
+}
+
+impl Evaluation<'_> {
+    /// Whether experiment `e` was asked for (`disturbances` asks for every
+    /// disturbance class).
+    fn want(&self, e: Experiment) -> bool {
+        self.a.experiments.contains(&e)
+            || (matches!(e, Experiment::Disturbance(_))
+                && self.a.experiments.contains(&Experiment::Disturbances))
+    }
+
+    /// The simulated scans of the arguments with range noise `noise` (m),
+    /// `short` random short returns and `swap` swapped beam pairs.
+    fn spec(&self, noise: f32, short: usize, swap: usize) -> ScanSpec {
+        let a = self.a;
+        ScanSpec {
+            beams: a.beams,
+            fov: self.fov,
+            range_max: a.range_max,
+            noise,
+            short_outliers: short,
+            swap_outliers: swap,
+            disturbance: None,
+            prior_radius: a.prior_radius,
+            prior_heading_tol: a.prior_heading_tol.to_radians(),
         }
     }
-    let _ = static_trials;
-    if want(Experiment::WrongMap) {
+
+    /// The requested E4 runs, by name, in report order: static, dynamic,
+    /// dynamic-swap, then the disturbance classes.
+    fn e4_runs(&self) -> Vec<(&'static str, ScanSpec)> {
+        let a = self.a;
+        [
+            (Experiment::Static, self.spec(0.0, 0, 0)),
+            (Experiment::Dynamic, self.spec(a.noise, a.outliers, 0)),
+            (Experiment::DynamicSwap, self.spec(a.noise, 0, a.outliers)),
+        ]
+        .into_iter()
+        .chain(mapc::disturb::Class::ALL.map(|c| {
+            (
+                Experiment::Disturbance(c),
+                ScanSpec {
+                    disturbance: Some(c),
+                    ..self.spec(0.0, 0, 0)
+                },
+            )
+        }))
+        .filter(|&(e, _)| self.want(e))
+        .map(|(e, sp)| (e.name(), sp))
+        .collect()
+    }
+
+    /// E4 (and E5) run `name`: localizes a scan `sp` at each of `poses`,
+    /// dumps the inputs (`--dump`), draws the figures and reports the
+    /// summary and the statistics of [`e4_statistics`].
+    fn e4(
+        &self,
+        name: &str,
+        sp: &ScanSpec,
+        poses: &[refloc::Pose2],
+        report: &mut Report,
+    ) -> Result<(), crate::util::CliError> {
+        let a = self.a;
+        if let Some(dir) = &a.dump {
+            dump_e4(&self.db, poses, sp, a.seed, dir, name)?;
+        }
+        let pb = self.ui.progress(poses.len() as u64, name);
+        let tick = || pb.inc(1);
+        let trials = eval::run_e4(&self.db, poses, sp, a.seed, None, &tick);
+        pb.finish_and_clear();
+        let s = eval::summarize(&trials);
+        self.ui.note(&fmt_summary(name, &s));
+        if !a.no_figures {
+            self.e4_figures(name, &trials);
+        }
+        e4_statistics(name, &trials, &mut report.json);
+        report.summary(name, &s);
+        Ok(())
+    }
+
+    /// The figures of E4 run `name` (a warning when they cannot be written).
+    fn e4_figures(&self, name: &str, trials: &[Trial]) {
+        let out = &self.a.out;
+        let _ = std::fs::create_dir_all(out);
+        let f = |n: &str| out.join(format!("{name}-{n}.png"));
+        let r = figures::poses_figure(
+            &self.db,
+            trials,
+            &format!("E4 {name}: true vs estimated poses"),
+            300,
+            &f("poses"),
+        )
+        .and_then(|_| {
+            figures::error_figure(
+                trials,
+                &format!("E4 {name}: pose errors (Fig. 12)"),
+                &f("errors"),
+            )
+        })
+        .and_then(|_| {
+            figures::rank_figure(
+                trials,
+                &format!("E5 {name}: coarse rank of the correct site (Fig. 16)"),
+                &f("ranks"),
+            )
+        });
+        if let Err(e) = r {
+            self.ui.note(&format!("warning: figures not written: {e}"));
+        }
+    }
+
+    /// The wrong-map run: scans simulated in the `--foreign` map, none of
+    /// which may be accepted.
+    fn wrong_map(&self, report: &mut Report) -> Result<(), crate::util::CliError> {
+        let a = self.a;
         let Some(fp) = &a.foreign else {
             return Err(input_err(anyhow::anyhow!(
                 "wrong-map needs --foreign MAP.yaml"
@@ -429,19 +469,19 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
             a.poses,
             a.seed ^ 0xF0,
         );
-        let pb = ui.progress(fposes.len() as u64, "wrong-map");
+        let pb = self.ui.progress(fposes.len() as u64, "wrong-map");
         let tick = || pb.inc(1);
         let trials = eval::run_e4(
-            &db,
+            &self.db,
             &fposes,
-            &spec(0.0, 0, 0),
+            &self.spec(0.0, 0, 0),
             a.seed,
             Some((&bg, &frame)),
             &tick,
         );
         pb.finish_and_clear();
         let accepted = trials.iter().filter(|t| t.accepted).count();
-        report["accepted_wrong_map"] = serde_json::to_value(
+        report.json["accepted_wrong_map"] = serde_json::to_value(
             trials
                 .iter()
                 .filter(|t| t.accepted)
@@ -449,7 +489,7 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
                 .collect::<Vec<_>>(),
         )
         .unwrap_or(Value::Null);
-        ui.note(&format!(
+        self.ui.note(&format!(
             "wrong-map      n {:>5}  accepted {} ({:.2}%)",
             trials.len(),
             accepted,
@@ -463,25 +503,57 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
             false_accept_rate: accepted as f64 / trials.len().max(1) as f64,
             ..Summary::default()
         };
-        summaries.insert(
-            "wrong-map".into(),
-            serde_json::to_value(&s).unwrap_or(Value::Null),
-        );
+        report.summary("wrong-map", &s);
+        Ok(())
     }
-    if want(Experiment::E1) {
-        let done = AtomicU64::new(0);
-        let pb = ui.progress(a.e1_trials as u64, "e1");
-        let e1poses = eval::sample_poses(&db, a.e1_trials, a.clearance, a.seed ^ 0xE1);
-        let mut dumped: Vec<Value> = Vec::new();
+
+    /// E1: scan-to-scan SSM accuracy over `--e1-trials` simulated pairs
+    /// (dumped with `--dump`).
+    fn e1(&self, report: &mut Report) -> Result<(), crate::util::CliError> {
+        let trials = self.e1_trials()?;
+        let errs: Vec<[f64; 3]> = trials.iter().filter_map(|t| t.err).collect();
+        let good: Vec<[f64; 3]> = errs
+            .iter()
+            .copied()
+            .filter(|e| {
+                (e[0].powi(2) + e[1].powi(2)).sqrt() < 0.3 && e[2].abs() < 5f64.to_radians()
+            })
+            .collect();
+        let (m, sd) = eval::mean_sd(&good);
+        self.ui.note(&format!(
+            "e1             n {:>5}  matched {} ({} within 0.3 m / 5 deg)  x {:.2} ({:.2}) mm  y {:.2} ({:.2}) mm  th {:.3} ({:.3}) deg   [paper: 0.27 (10.51), -0.42 (7.99), 0.01 (0.09)]",
+            trials.len(),
+            errs.len(),
+            good.len(),
+            m[0] * 1000.0,
+            sd[0] * 1000.0,
+            m[1] * 1000.0,
+            sd[1] * 1000.0,
+            m[2].to_degrees(),
+            sd[2].to_degrees()
+        ));
+        report.json["e1"] = json!({"trials": trials.len(), "matched": errs.len(), "correct": good.len(),
+            "mean_mm_mm_deg": [m[0]*1000.0, m[1]*1000.0, m[2].to_degrees()],
+            "sd_mm_mm_deg": [sd[0]*1000.0, sd[1]*1000.0, sd[2].to_degrees()],
+            "paper_mean": [0.27, -0.42, 0.01], "paper_sd": [10.51, 7.99, 0.09]});
+        Ok(())
+    }
+
+    /// The E1 trials, in pose order, each pair from its own random stream;
+    /// with `--dump` the pairs are written to `e1-pairs.jsonl`.
+    fn e1_trials(&self) -> Result<Vec<eval::E1Trial>, crate::util::CliError> {
         use rayon::prelude::*;
+        let (a, db) = (self.a, &self.db);
+        let pb = self.ui.progress(a.e1_trials as u64, "e1");
+        let e1poses = eval::sample_poses(db, a.e1_trials, a.clearance, a.seed ^ 0xE1);
+        let mut dumped: Vec<Value> = Vec::new();
         let trials: Vec<eval::E1Trial> = e1poses
             .par_iter()
             .enumerate()
             .map(|(k, p)| {
                 let mut r = Rng::stream(a.seed ^ 0xE1E1, k as u64);
-                let pair = eval::e1_pair(&db, p, 0.010, 60, 0.4, 30f32.to_radians(), &mut r);
-                let t = eval::ssm_match_pair(&db, &pair);
-                done.fetch_add(1, Ordering::Relaxed);
+                let pair = eval::e1_pair(db, p, 0.010, 60, 0.4, 30f32.to_radians(), &mut r);
+                let t = eval::ssm_match_pair(db, &pair);
                 pb.inc(1);
                 (t, a.dump.as_ref().map(|_| pair))
             })
@@ -503,42 +575,22 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
             let text: String = dumped.iter().map(|v| format!("{v}\n")).collect();
             write_dump(dir, "e1-pairs.jsonl", &text)?;
         }
-        let errs: Vec<[f64; 3]> = trials.iter().filter_map(|t| t.err).collect();
-        let good: Vec<[f64; 3]> = errs
-            .iter()
-            .copied()
-            .filter(|e| {
-                (e[0].powi(2) + e[1].powi(2)).sqrt() < 0.3 && e[2].abs() < 5f64.to_radians()
-            })
-            .collect();
-        let (m, sd) = eval::mean_sd(&good);
-        ui.note(&format!(
-            "e1             n {:>5}  matched {} ({} within 0.3 m / 5 deg)  x {:.2} ({:.2}) mm  y {:.2} ({:.2}) mm  th {:.3} ({:.3}) deg   [paper: 0.27 (10.51), -0.42 (7.99), 0.01 (0.09)]",
-            trials.len(),
-            errs.len(),
-            good.len(),
-            m[0] * 1000.0,
-            sd[0] * 1000.0,
-            m[1] * 1000.0,
-            sd[1] * 1000.0,
-            m[2].to_degrees(),
-            sd[2].to_degrees()
-        ));
-        report["e1"] = json!({"trials": trials.len(), "matched": errs.len(), "correct": good.len(),
-            "mean_mm_mm_deg": [m[0]*1000.0, m[1]*1000.0, m[2].to_degrees()],
-            "sd_mm_mm_deg": [sd[0]*1000.0, sd[1]*1000.0, sd[2].to_degrees()],
-            "paper_mean": [0.27, -0.42, 0.01], "paper_sd": [10.51, 7.99, 0.09]});
+        Ok(trials)
     }
-    if want(Experiment::E2) {
+
+    /// E2: the SSM matching rate against rising noise and rising outliers,
+    /// averaged over `--e2-trials` poses a point (Fig. 6).
+    fn e2(&self, report: &mut Report) {
         use rayon::prelude::*;
-        let base = eval::sample_poses(&db, a.e2_trials, a.clearance, a.seed ^ 0xE2);
+        let (a, db) = (self.a, &self.db);
+        let base = eval::sample_poses(db, a.e2_trials, a.clearance, a.seed ^ 0xE2);
         let curve = |noise: f32, outliers: usize, tag: u64| -> f64 {
             let rates: Vec<f64> = base
                 .par_iter()
                 .enumerate()
                 .map(|(k, p)| {
                     let mut r = Rng::stream(a.seed ^ tag, k as u64);
-                    eval::ssm_trial(&db, p, noise, outliers, 0.4, 30f32.to_radians(), &mut r)
+                    eval::ssm_trial(db, p, noise, outliers, 0.4, 30f32.to_radians(), &mut r)
                         .matching_rate
                 })
                 .collect();
@@ -557,19 +609,20 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
             .enumerate()
             .map(|(k, &r)| curve(0.005, (r * n_in) as usize, 0x2B00 + k as u64))
             .collect();
-        ui.note(&format!(
+        let rounded = |v: &[f64]| {
+            v.iter()
+                .map(|v| (v * 100.0).round() / 100.0)
+                .collect::<Vec<_>>()
+        };
+        self.ui.note(&format!(
             "e2 (a) noise mm {:?} -> rate {:?}",
             noises,
-            ra.iter()
-                .map(|v| (v * 100.0).round() / 100.0)
-                .collect::<Vec<_>>()
+            rounded(&ra)
         ));
-        ui.note(&format!(
+        self.ui.note(&format!(
             "e2 (b) outlier ratio {:?} -> rate {:?}",
             ratios,
-            rb.iter()
-                .map(|v| (v * 100.0).round() / 100.0)
-                .collect::<Vec<_>>()
+            rounded(&rb)
         ));
         if !a.no_figures {
             let _ = std::fs::create_dir_all(&a.out);
@@ -588,10 +641,56 @@ pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
                 &a.out.join("e2-outliers.png"),
             );
         }
-        report["e2"] = json!({"noise_mm": noises, "rate_vs_noise": ra, "outlier_ratio": ratios, "rate_vs_outliers": rb, "trials_per_point": a.e2_trials});
+        report.json["e2"] = json!({"noise_mm": noises, "rate_vs_noise": ra, "outlier_ratio": ratios, "rate_vs_outliers": rb, "trials_per_point": a.e2_trials});
     }
-    report["summaries"] = serde_json::to_value(&summaries).unwrap_or(Value::Null);
-    Ok(report)
+}
+
+/// The statistics of E4 run `name` beyond its summary, into `report`: the
+/// E5 coarse ranks of the correct site, the long-range ratios of the
+/// correct estimates, the vicinity ratios of the correct and the wrong
+/// ones, and the first 50 failures.
+fn e4_statistics(name: &str, trials: &[Trial], report: &mut Value) {
+    let ranks: Vec<usize> = trials.iter().filter_map(|t| t.correct_rank).collect();
+    let within =
+        |k: usize| ranks.iter().filter(|&&r| r < k).count() as f64 / ranks.len().max(1) as f64;
+    report[format!("e5_{name}")] = json!({
+        "with_site_in_sight": ranks.len(),
+        "rank_within": {"1": within(1), "5": within(5), "10": within(10), "20": within(20), "30": within(30)},
+        "rank_histogram": (0..30).map(|k| ranks.iter().filter(|&&r| r == k).count()).collect::<Vec<_>>(),
+    });
+    let failures: Vec<&Trial> = trials.iter().filter(|t| !t.correct()).take(50).collect();
+    let ratios = |ok: bool| -> Vec<f64> {
+        let mut v: Vec<f64> = trials
+            .iter()
+            .filter(|t| t.est.is_some() && t.correct() == ok)
+            .map(|t| t.vicinity_ratio)
+            .collect();
+        v.sort_by(|a, b| a.total_cmp(b));
+        v
+    };
+    let (good, bad) = (ratios(true), ratios(false));
+    let pct = |v: &[f64], q: f64| {
+        v.get(((v.len() as f64 - 1.0) * q).round() as usize)
+            .copied()
+            .unwrap_or(f64::NAN)
+    };
+    let mut longs: Vec<f64> = trials
+        .iter()
+        .filter(|t| t.correct())
+        .map(|t| t.long_ratio)
+        .collect();
+    longs.sort_by(|a, b| a.total_cmp(b));
+    report[format!("long_ratio_correct_{name}")] = json!([
+        pct(&longs, 0.5),
+        pct(&longs, 0.95),
+        pct(&longs, 0.99),
+        longs.last().copied()
+    ]);
+    report[format!("vicinity_{name}")] = json!({
+        "correct_p01_p05_p50": [pct(&good, 0.01), pct(&good, 0.05), pct(&good, 0.5)],
+        "wrong_p50_p95_p99_max": [pct(&bad, 0.5), pct(&bad, 0.95), pct(&bad, 0.99), bad.last().copied().unwrap_or(f64::NAN)],
+    });
+    report[format!("failures_{name}")] = serde_json::to_value(&failures).unwrap_or(Value::Null);
 }
 
 /// Writes `text` to `dir/name` (creating `dir`).

@@ -10,7 +10,7 @@ use mapc::scanio::{self, InputFormat, ReadOptions, ScanData};
 use refloc::scratch_size;
 use serde_json::json;
 
-use crate::util::{fail_err, input_err, open_db, Check, CliError, CliResult, Ui};
+use crate::util::{fail_err, input_err, open_db, Check, CliError, CliResult, DbBytes, Ui};
 
 /// Where the results go: standard output, every write checked.
 ///
@@ -430,6 +430,8 @@ fn run_maps(a: &Args, ui: &Ui) -> CliResult {
     })
 }
 
+/// `mapc localize`: each scan against the database (several databases:
+/// [`run_maps`]), one result line a scan, then a summary on stderr.
 pub fn run(a: Args, ui: &Ui) -> CliResult {
     if a.db.len() > 1 {
         return run_maps(&a, ui);
@@ -437,33 +439,30 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     let db = open_db(&a.db[0], Check::Full)?;
     let text = output_is_text(&a)?;
     let prior = prior_of(&a)?;
-    let truth: HashMap<usize, [f64; 3]> = match &a.truth {
-        Some(p) => scanio::read_poses_in_map(p)
-            .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", p.display())))?
-            .into_iter()
-            .collect(),
-        None => HashMap::new(),
-    };
+    let truth = read_truth(&a)?;
     let scans = scan_source(&a, ui)?;
-    let mut rec = match &a.mcap {
-        Some(p) => Some(
-            mapc::recording::Recording::create(p)
+    let rec = match &a.mcap {
+        Some(p) => Some(Recorder {
+            rec: mapc::recording::Recording::create(p)
                 .map_err(|e| fail_err(anyhow::anyhow!("--mcap {}: {e}", p.display())))?,
-        ),
+            map_written: false,
+        }),
         None => None,
     };
-    let mut map_written = false;
-    let rec_err = |e: anyhow::Error| fail_err(anyhow::anyhow!("--mcap: {e}"));
+    let map = OneMap {
+        a: &a,
+        db: &db,
+        text,
+        prior,
+        truth,
+    };
     let stdout = std::io::stdout();
     let mut out = Sink::new(stdout.lock(), is_stream(&a.input));
-    let mut scratch: Vec<u8> = Vec::new();
-    let (mut n, mut failed, mut accepted, mut correct, mut false_acc) =
-        (0usize, 0usize, 0usize, 0usize, 0usize);
-    let mut false_acc_truth_fits_worse = 0usize;
-    let mut false_acc_truth_refines_to_ours = 0usize;
-    let (mut correct_refined, mut false_acc_refined) = (0usize, 0usize);
-    let mut errs: Vec<f64> = Vec::new();
-    let mut times: Vec<f64> = Vec::new();
+    let mut session = Session {
+        scratch: Vec::new(),
+        rec,
+        tally: Tally::default(),
+    };
     if text {
         out.line(&format!(
             "{:<12} {:>4} {:>9} {:>9} {:>8} {:>6} {:>9} {:>8} {:>8} {:>6} {:>8}",
@@ -474,20 +473,143 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         if out.closed {
             break;
         }
-        n += 1;
-        let scan = match item {
-            Ok(s) => s,
+        session.tally.n += 1;
+        let line = match item {
+            Ok(scan) => session.localize(&map, k, &scan)?,
             Err(e) => {
-                failed += 1;
-                out.line(&unreadable_line(&e, text))?;
-                continue;
+                session.tally.failed += 1;
+                unreadable_line(&e, text)
             }
         };
-        grow_scratch(&mut scratch, db.params(), scan.data.len());
+        out.line(&line)?;
+    }
+    out.finish()?;
+    if let Some(r) = session.rec {
+        r.rec.finish().map_err(rec_err)?;
+    }
+    let mut tally = session.tally;
+    if out.closed {
+        ui.note(&format!(
+            "output closed by its reader after {} scans; stopped there",
+            tally.n
+        ));
+    }
+    if !ui.quiet {
+        tally.print(!map.truth.is_empty());
+    }
+    Ok(if tally.failed > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+/// `--truth`: the given robot poses by scan index (none without it).
+fn read_truth(a: &Args) -> Result<HashMap<usize, [f64; 3]>, CliError> {
+    Ok(match &a.truth {
+        Some(p) => scanio::read_poses_in_map(p)
+            .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", p.display())))?
+            .into_iter()
+            .collect(),
+        None => HashMap::new(),
+    })
+}
+
+/// A `--mcap` write error.
+fn rec_err(e: anyhow::Error) -> CliError {
+    fail_err(anyhow::anyhow!("--mcap: {e}"))
+}
+
+/// What localizing a scan against the one database takes, fixed for the
+/// run: the options, the database, the output format, the prior and the
+/// given truth poses.
+struct OneMap<'a> {
+    a: &'a Args,
+    db: &'a refloc::RefDb<DbBytes>,
+    text: bool,
+    prior: Option<refloc::Prior>,
+    truth: HashMap<usize, [f64; 3]>,
+}
+
+/// What changes from scan to scan: the localizer's scratch space, the
+/// `--mcap` recording and the counts for the summary.
+struct Session {
+    scratch: Vec<u8>,
+    rec: Option<Recorder>,
+    tally: Tally,
+}
+
+impl Session {
+    /// Localizes scan `k` of the input against `map`, records it
+    /// (`--mcap`), counts it and returns its output line.
+    fn localize(
+        &mut self,
+        map: &OneMap<'_>,
+        k: usize,
+        scan: &scanio::InputScan,
+    ) -> Result<String, CliError> {
+        let db = map.db;
+        grow_scratch(&mut self.scratch, db.params(), scan.data.len());
         let input = scan.data.as_scan();
         let t0 = Instant::now();
-        let r = refloc::localize_with_prior(&db, &input, &mut scratch, prior);
+        let r = refloc::localize_with_prior(db, &input, &mut self.scratch, map.prior);
         let time_us = t0.elapsed().as_micros() as u64;
+        if let Some(rec) = self.rec.as_mut() {
+            rec.record(db, k, scan, &r)?;
+        }
+        self.tally.times.push(time_us as f64);
+        let judged = map.judge(k, scan);
+        Ok(match r {
+            Ok(l) => {
+                let err = judged
+                    .as_ref()
+                    .map(|j| mapc::eval::pose_error(&l.pose, j.truth));
+                self.tally.count(&l, judged.as_ref(), err);
+                let found = Found {
+                    scan,
+                    l: &l,
+                    time_us,
+                    err,
+                    judged: judged.as_ref(),
+                };
+                if map.text {
+                    found.text_line()
+                } else {
+                    found.json_line(map.a.no_candidates)
+                }
+            }
+            // A scan that cannot be localized is a result, not a failed line.
+            Err(e) => {
+                if map.text {
+                    format!("{:<12} {:>4} not localized: {e}", scan.id, "no")
+                } else {
+                    let mut o = json!({"id": scan.id, "accepted": false, "reason": e.to_string(), "time_us": time_us});
+                    add_stamp(&mut o, scan);
+                    o.to_string()
+                }
+            }
+        })
+    }
+}
+
+/// The `--mcap` recording, and whether the map is in it yet.
+struct Recorder {
+    rec: mapc::recording::Recording,
+    map_written: bool,
+}
+
+impl Recorder {
+    /// Records scan `k` and its localization `r`: the map (at the first
+    /// readable scan's time), the scan, the hypotheses, and when accepted
+    /// the pose and the transform to the sensor frame.
+    fn record(
+        &mut self,
+        db: &refloc::RefDb<DbBytes>,
+        k: usize,
+        scan: &scanio::InputScan,
+        r: &Result<refloc::Localization<'_>, refloc::LocalizeError>,
+    ) -> Result<(), CliError> {
+        let rec = &mut self.rec;
         let at_ns = scan.stamp.as_ref().map_or(k as i64 * 100_000_000, |s| s.ns);
         let frame_id = scan
             .stamp
@@ -499,230 +621,289 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             ns: at_ns,
             frame: frame_id,
         };
-        if let Some(rec) = rec.as_mut() {
-            if !map_written {
-                // At the first readable scan's time.
-                rec.map(at_ns, &db.frame(), &db.grid()).map_err(rec_err)?;
-                map_written = true;
-            }
-            if let ScanData::Ranges {
-                angle_min,
-                angle_increment,
-                range_min,
-                range_max,
+        if !self.map_written {
+            // At the first readable scan's time.
+            rec.map(at_ns, &db.frame(), &db.grid()).map_err(rec_err)?;
+            self.map_written = true;
+        }
+        if let ScanData::Ranges {
+            angle_min,
+            angle_increment,
+            range_min,
+            range_max,
+            ranges,
+        } = &scan.data
+        {
+            rec.scan(
+                &at,
+                *angle_min,
+                *angle_increment,
+                *range_min,
+                *range_max,
                 ranges,
-            } = &scan.data
-            {
-                rec.scan(
-                    &at,
-                    *angle_min,
-                    *angle_increment,
-                    *range_min,
-                    *range_max,
-                    ranges,
-                )
-                .map_err(rec_err)?;
-            }
-            if let Ok(l) = &r {
-                let hyps: Vec<refloc::Pose2> = l.hypotheses().iter().map(|h| h.pose).collect();
-                rec.hypotheses(at_ns, &hyps).map_err(rec_err)?;
-                if l.accepted {
-                    rec.pose(at_ns, &l.pose, l.covariance).map_err(rec_err)?;
-                    rec.tf(&at, &l.pose.compose(&db.params().sensor.offset))
-                        .map_err(rec_err)?;
-                }
+            )
+            .map_err(rec_err)?;
+        }
+        if let Ok(l) = r {
+            let hyps: Vec<refloc::Pose2> = l.hypotheses().iter().map(|h| h.pose).collect();
+            rec.hypotheses(at_ns, &hyps).map_err(rec_err)?;
+            if l.accepted {
+                rec.pose(at_ns, &l.pose, l.covariance).map_err(rec_err)?;
+                rec.tf(&at, &l.pose.compose(&db.params().sensor.offset))
+                    .map_err(rec_err)?;
             }
         }
-        times.push(time_us as f64);
-        // The truth index is the scan's position among the laser lines.
+        Ok(())
+    }
+}
+
+/// A scan's given truth pose (`--truth`) and how well it, and it corrected
+/// against the map, explain the scan.
+struct Judged {
+    /// The given robot pose `[x (m), y (m), theta (rad)]`.
+    truth: [f64; 3],
+    /// The vicinity ratio (M / max) of the scan at the truth's sensor pose:
+    /// a low value means the truth and the map disagree there.
+    fit: f64,
+    /// The truth corrected locally against the map with the scan's own
+    /// points (a search near the truth pose, then a fit): where the map
+    /// puts the scan near the truth. A second reference for the figures
+    /// where the truth and the map disagree.
+    refined: refloc::Pose2,
+    /// The vicinity ratio at `refined`'s sensor pose.
+    refined_fit: f64,
+}
+
+impl OneMap<'_> {
+    /// The truth of scan `k` judged against the scan and the map, when
+    /// there is one. The truth index is the scan's position among the
+    /// laser lines.
+    fn judge(&self, k: usize, scan: &scanio::InputScan) -> Option<Judged> {
+        let db = self.db;
         let scan_index = scan
             .id
             .strip_prefix("scan ")
             .and_then(|s| s.parse().ok())
             .unwrap_or(k);
-        let gt = truth.get(&scan_index).copied();
+        let truth = self.truth.get(&scan_index).copied()?;
         // The scan's beams as (angle in the sensor frame (rad), range (m)),
-        // non-returns infinite: for judging the given truth pose (only
-        // made when there is one).
-        let beams = if gt.is_some() {
-            scan.data.beams()
-        } else {
-            Vec::new()
-        };
+        // non-returns infinite.
+        let beams = scan.data.beams();
         let rmax = match &scan.data {
             ScanData::Ranges { range_max, .. } | ScanData::Points { range_max, .. } => *range_max,
         };
-        let truth_sensor = gt.map(|g| {
-            refloc::Pose2::new(g[0] as f32, g[1] as f32, g[2] as f32)
-                .compose(&db.params().sensor.offset)
-        });
-        // How well a sensor pose explains the scan (M / max): a low value at
-        // the given truth means the truth and the map disagree there.
+        let offset = &db.params().sensor.offset;
+        let sensor =
+            refloc::Pose2::new(truth[0] as f32, truth[1] as f32, truth[2] as f32).compose(offset);
+        // How well a sensor pose explains the scan (M / max).
         let fit = |sensor: &refloc::Pose2| {
             let grid = db.grid();
-            let v = refloc::verify::Verifier::new(&db, &grid, rmax)
-                .score(sensor, beams.iter().copied());
+            let v =
+                refloc::verify::Verifier::new(db, &grid, rmax).score(sensor, beams.iter().copied());
             v.vicinity_ratio() as f64
         };
-        let truth_fit = truth_sensor.as_ref().map(fit);
-        // The given truth corrected locally against the map with the scan's
-        // own points (a search near the truth pose, then a fit): where the
-        // map puts the scan near the truth. A second reference for the
-        // figures where the truth and the map disagree.
-        let refined_truth =
-            truth_sensor.map(|sensor| mapc::eval::correct_truth_locally(&db, &beams, sensor));
-        let refined_fit = refined_truth.map(|r| fit(&r.compose(&db.params().sensor.offset)));
-        match r {
-            Ok(l) => {
-                if l.accepted {
-                    accepted += 1;
-                }
-                let err = gt.map(|g| mapc::eval::pose_error(&l.pose, g));
-                // Within the tolerance of the corrected truth.
-                let ok_refined = refined_truth.map(|r| {
-                    mapc::eval::within_tolerance(&l.pose, [r.x as f64, r.y as f64, r.theta as f64])
-                });
-                if let (Some(ok), true) = (ok_refined, l.accepted) {
-                    if ok {
-                        correct_refined += 1;
-                    } else {
-                        false_acc_refined += 1;
-                    }
-                }
-                if let Some(g) = gt {
-                    if l.accepted && mapc::eval::within_tolerance(&l.pose, g) {
-                        correct += 1;
-                        errs.extend(err.map(|(e, _)| e));
-                    } else if l.accepted {
-                        false_acc += 1;
-                        let ours = refloc::verify::ratio(l.vicinity, l.valid_points) as f64;
-                        if truth_fit.is_some_and(|t| t < ours - 0.2) {
-                            false_acc_truth_fits_worse += 1;
-                        }
-                        // Where does the given truth go when it is corrected
-                        // against the map? Onto the estimate means the map
-                        // puts the scan where we did.
-                        if ok_refined == Some(true) {
-                            false_acc_truth_refines_to_ours += 1;
-                        }
-                    }
-                }
-                if text {
-                    out.line(&format!(
-                        "{:<12} {:>4} {:>9.3} {:>9.3} {:>8.4} {:>6} {:>9.1} {:>8.1} {:>8.1} {:>6.3} {:>8.2}{}",
-                        scan.id,
-                        if l.accepted { "yes" } else { "no" },
-                        l.pose.x,
-                        l.pose.y,
-                        l.pose.theta,
-                        l.site,
-                        l.match_score,
-                        l.vicinity,
-                        l.vicinity_threshold,
-                        l.confidence,
-                        time_us as f64 / 1000.0,
-                        err.map(|(e, t)| format!("  err {:.3} m {:.2} deg", e, t.to_degrees())).unwrap_or_default()
-                    ))?;
-                } else {
-                    let mut o = json!({
-                        "id": scan.id, "accepted": l.accepted,
-                        "x": l.pose.x, "y": l.pose.y, "theta": l.pose.theta,
-                        "site": l.site, "coarse_rank": l.coarse_rank, "gamma": l.gamma,
-                        "match_score": l.match_score, "inliers": l.inliers,
-                        "vicinity": l.vicinity, "vicinity_threshold": l.vicinity_threshold,
-                        "valid_points": l.valid_points, "short_beams": l.short_beams, "long_beams": l.long_beams, "through_beams": l.through_beams,
-                        "evidence": l.evidence, "free_space_ok": l.free_space_ok,
-                        "ambiguous": l.ambiguous, "time_us": time_us,
-                        "confidence": l.confidence,
-                        "covariance": l.covariance,
-                        "hypotheses": l.hypotheses().iter()
-                            .map(|h| json!({"x": h.pose.x, "y": h.pose.y, "theta": h.pose.theta, "confidence": h.confidence}))
-                            .collect::<Vec<_>>(),
-                    });
-                    add_stamp(&mut o, &scan);
-                    if a.no_candidates {
-                        o["candidates"] = json!(l.candidates.len());
-                    } else {
-                        o["candidates"] = l
-                            .candidates
-                            .iter()
-                            .map(|c| json!({"site": c.site, "rank": c.rank, "gamma": c.gamma, "match_score": c.match_score,
-                                "has_pose": c.has_pose != 0, "x": c.x, "y": c.y, "theta": c.theta, "vicinity": c.vicinity,
-                                "evidence": c.evidence, "free_space_ok": c.free_space_ok != 0, "short_beams": c.short_beams, "pairs": c.pairs,
-                                "through_beams": c.through_beams, "long_beams": c.long_beams}))
-                            .collect();
-                    }
-                    if let Some((e, et)) = err {
-                        o["truth"] = json!(gt);
-                        o["error_m"] = json!(e);
-                        o["error_rad"] = json!(et);
-                        o["truth_vicinity_ratio"] = json!(truth_fit);
-                        if let Some(r) = refined_truth {
-                            o["truth_refined"] = json!([r.x, r.y, r.theta]);
-                            o["truth_refined_vicinity_ratio"] = json!(refined_fit);
-                        }
-                    }
-                    out.line(&o.to_string())?;
-                }
+        let truth_fit = fit(&sensor);
+        let refined = mapc::eval::correct_truth_locally(db, &beams, sensor);
+        Some(Judged {
+            truth,
+            fit: truth_fit,
+            refined,
+            refined_fit: fit(&refined.compose(offset)),
+        })
+    }
+}
+
+/// A localized scan, for its output line.
+struct Found<'a, 's> {
+    scan: &'a scanio::InputScan,
+    l: &'a refloc::Localization<'s>,
+    time_us: u64,
+    /// Position (m) and heading (rad) error against the truth, if given.
+    err: Option<(f64, f64)>,
+    judged: Option<&'a Judged>,
+}
+
+impl Found<'_, '_> {
+    /// The `--format text` row.
+    fn text_line(&self) -> String {
+        let (scan, l) = (self.scan, self.l);
+        format!(
+            "{:<12} {:>4} {:>9.3} {:>9.3} {:>8.4} {:>6} {:>9.1} {:>8.1} {:>8.1} {:>6.3} {:>8.2}{}",
+            scan.id,
+            if l.accepted { "yes" } else { "no" },
+            l.pose.x,
+            l.pose.y,
+            l.pose.theta,
+            l.site,
+            l.match_score,
+            l.vicinity,
+            l.vicinity_threshold,
+            l.confidence,
+            self.time_us as f64 / 1000.0,
+            self.err
+                .map(|(e, t)| format!("  err {:.3} m {:.2} deg", e, t.to_degrees()))
+                .unwrap_or_default()
+        )
+    }
+
+    /// The `--format json` object (candidates only counted with
+    /// `no_candidates`).
+    fn json_line(&self, no_candidates: bool) -> String {
+        let (scan, l) = (self.scan, self.l);
+        let mut o = json!({
+            "id": scan.id, "accepted": l.accepted,
+            "x": l.pose.x, "y": l.pose.y, "theta": l.pose.theta,
+            "site": l.site, "coarse_rank": l.coarse_rank, "gamma": l.gamma,
+            "match_score": l.match_score, "inliers": l.inliers,
+            "vicinity": l.vicinity, "vicinity_threshold": l.vicinity_threshold,
+            "valid_points": l.valid_points, "short_beams": l.short_beams, "long_beams": l.long_beams, "through_beams": l.through_beams,
+            "evidence": l.evidence, "free_space_ok": l.free_space_ok,
+            "ambiguous": l.ambiguous, "time_us": self.time_us,
+            "confidence": l.confidence,
+            "covariance": l.covariance,
+            "hypotheses": l.hypotheses().iter()
+                .map(|h| json!({"x": h.pose.x, "y": h.pose.y, "theta": h.pose.theta, "confidence": h.confidence}))
+                .collect::<Vec<_>>(),
+        });
+        add_stamp(&mut o, scan);
+        if no_candidates {
+            o["candidates"] = json!(l.candidates.len());
+        } else {
+            o["candidates"] = l
+                .candidates
+                .iter()
+                .map(|c| json!({"site": c.site, "rank": c.rank, "gamma": c.gamma, "match_score": c.match_score,
+                    "has_pose": c.has_pose != 0, "x": c.x, "y": c.y, "theta": c.theta, "vicinity": c.vicinity,
+                    "evidence": c.evidence, "free_space_ok": c.free_space_ok != 0, "short_beams": c.short_beams, "pairs": c.pairs,
+                    "through_beams": c.through_beams, "long_beams": c.long_beams}))
+                .collect();
+        }
+        if let (Some((e, et)), Some(j)) = (self.err, self.judged) {
+            o["truth"] = json!(j.truth);
+            o["error_m"] = json!(e);
+            o["error_rad"] = json!(et);
+            o["truth_vicinity_ratio"] = json!(j.fit);
+            let r = j.refined;
+            o["truth_refined"] = json!([r.x, r.y, r.theta]);
+            o["truth_refined_vicinity_ratio"] = json!(j.refined_fit);
+        }
+        o.to_string()
+    }
+}
+
+/// The counts and figures of the stderr summary.
+#[derive(Default)]
+struct Tally {
+    /// Input items (scans and unreadable lines).
+    n: usize,
+    failed: usize,
+    accepted: usize,
+    /// Against the given truth: accepted and within the tolerance.
+    correct: usize,
+    /// Against the given truth: accepted and not within the tolerance.
+    false_acc: usize,
+    /// False accepts where the truth explains the scan much worse.
+    false_acc_truth_fits_worse: usize,
+    /// False accepts whose corrected truth lands on the estimate.
+    false_acc_truth_refines_to_ours: usize,
+    /// Accepted and within the tolerance of the corrected truth.
+    correct_refined: usize,
+    /// Accepted and not within the tolerance of the corrected truth.
+    false_acc_refined: usize,
+    /// Position errors (m) of the correct estimates.
+    errs: Vec<f64>,
+    /// Localization times (µs).
+    times: Vec<f64>,
+}
+
+impl Tally {
+    /// Counts localization `l`, judged against the truth and its
+    /// correction (`err`: the error against the truth).
+    fn count(
+        &mut self,
+        l: &refloc::Localization<'_>,
+        judged: Option<&Judged>,
+        err: Option<(f64, f64)>,
+    ) {
+        if l.accepted {
+            self.accepted += 1;
+        }
+        // Within the tolerance of the corrected truth.
+        let ok_refined = judged.map(|j| {
+            let r = j.refined;
+            mapc::eval::within_tolerance(&l.pose, [r.x as f64, r.y as f64, r.theta as f64])
+        });
+        if let (Some(ok), true) = (ok_refined, l.accepted) {
+            if ok {
+                self.correct_refined += 1;
+            } else {
+                self.false_acc_refined += 1;
             }
-            Err(e) => {
-                // A scan that cannot be localized is a result, not a failed line.
-                let line = if text {
-                    format!("{:<12} {:>4} not localized: {e}", scan.id, "no")
-                } else {
-                    let mut o = json!({"id": scan.id, "accepted": false, "reason": e.to_string(), "time_us": time_us});
-                    add_stamp(&mut o, &scan);
-                    o.to_string()
-                };
-                out.line(&line)?;
+        }
+        let Some(j) = judged else {
+            return;
+        };
+        if l.accepted && mapc::eval::within_tolerance(&l.pose, j.truth) {
+            self.correct += 1;
+            self.errs.extend(err.map(|(e, _)| e));
+        } else if l.accepted {
+            self.false_acc += 1;
+            let ours = refloc::verify::ratio(l.vicinity, l.valid_points) as f64;
+            if j.fit < ours - 0.2 {
+                self.false_acc_truth_fits_worse += 1;
+            }
+            // Where does the given truth go when it is corrected against the
+            // map? Onto the estimate means the map puts the scan where we did.
+            if ok_refined == Some(true) {
+                self.false_acc_truth_refines_to_ours += 1;
             }
         }
     }
-    out.finish()?;
-    if let Some(rec) = rec {
-        rec.finish().map_err(rec_err)?;
-    }
-    if out.closed {
-        ui.note(&format!(
-            "output closed by its reader after {n} scans; stopped there"
-        ));
-    }
-    if !ui.quiet {
-        times.sort_by(|a, b| a.total_cmp(b));
-        let med_t = times.get(times.len() / 2).copied().unwrap_or(0.0);
+
+    /// The summary on stderr (the comparison with the truth when
+    /// `with_truth`).
+    fn print(&mut self, with_truth: bool) {
+        let n = self.n;
+        self.times.sort_by(|a, b| a.total_cmp(b));
+        let med_t = self.times.get(self.times.len() / 2).copied().unwrap_or(0.0);
         eprintln!(
-            "{n} scans, {failed} unreadable, {accepted} accepted, median {:.1} ms/scan",
+            "{n} scans, {} unreadable, {} accepted, median {:.1} ms/scan",
+            self.failed,
+            self.accepted,
             med_t / 1000.0
         );
-        if !truth.is_empty() {
-            errs.sort_by(|a, b| a.total_cmp(b));
-            let med = errs.get(errs.len() / 2).copied().unwrap_or(f64::NAN);
-            eprintln!(
-                "against truth: accepted and correct {} ({:.1}%), false accepts {} ({:.1}%), median position error {:.3} m",
-                correct,
-                100.0 * correct as f64 / n.max(1) as f64,
-                false_acc,
-                100.0 * false_acc as f64 / n.max(1) as f64,
-                med
-            );
-            eprintln!(
-                "  of the false accepts, {false_acc_truth_fits_worse} are where the given truth pose explains the scan much worse than the estimate (vicinity ratio lower by > 0.2): truth and map disagree there"
-            );
-            eprintln!(
-                "  against the given truth refined against the map (search within 0.5 m and 15 deg of the truth pose, then robust Gauss-Newton): accepted and correct {} ({:.1}%), false accepts {} ({:.1}%)",
-                correct_refined,
-                100.0 * correct_refined as f64 / n.max(1) as f64,
-                false_acc_refined,
-                100.0 * false_acc_refined as f64 / n.max(1) as f64,
-            );
-            eprintln!(
-                "  of the false accepts, {false_acc_truth_refines_to_ours} have a given truth that, refined against the map (search within 0.5 m and 15 deg of the truth pose, then robust Gauss-Newton), lands within 0.3 m / 5 deg of the estimate"
-            );
+        if !with_truth {
+            return;
         }
+        self.errs.sort_by(|a, b| a.total_cmp(b));
+        let med = self
+            .errs
+            .get(self.errs.len() / 2)
+            .copied()
+            .unwrap_or(f64::NAN);
+        let pct = |c: usize| 100.0 * c as f64 / n.max(1) as f64;
+        eprintln!(
+            "against truth: accepted and correct {} ({:.1}%), false accepts {} ({:.1}%), median position error {:.3} m",
+            self.correct,
+            pct(self.correct),
+            self.false_acc,
+            pct(self.false_acc),
+            med
+        );
+        eprintln!(
+            "  of the false accepts, {} are where the given truth pose explains the scan much worse than the estimate (vicinity ratio lower by > 0.2): truth and map disagree there",
+            self.false_acc_truth_fits_worse
+        );
+        eprintln!(
+            "  against the given truth refined against the map (search within 0.5 m and 15 deg of the truth pose, then robust Gauss-Newton): accepted and correct {} ({:.1}%), false accepts {} ({:.1}%)",
+            self.correct_refined,
+            pct(self.correct_refined),
+            self.false_acc_refined,
+            pct(self.false_acc_refined),
+        );
+        eprintln!(
+            "  of the false accepts, {} have a given truth that, refined against the map (search within 0.5 m and 15 deg of the truth pose, then robust Gauss-Newton), lands within 0.3 m / 5 deg of the estimate",
+            self.false_acc_truth_refines_to_ours
+        );
     }
-    Ok(if failed > 0 {
-        ExitCode::from(1)
-    } else {
-        ExitCode::SUCCESS
-    })
 }
