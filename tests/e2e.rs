@@ -529,7 +529,7 @@ fn eval_runs_the_disturbance_suite() {
     assert!(o.status.success(), "{}", text(&o));
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
-    for class in mapc::disturb::Class::ALL {
+    for class in mapc::tools::disturb::Class::ALL {
         let s = &report["summaries"][class.name()];
         let (n, correct) = (s["n"].as_u64().unwrap(), s["correct"].as_u64().unwrap());
         assert_eq!(n, 30, "{}", class.name());

@@ -183,7 +183,7 @@ fn mapfile_seeds_load() {
             &data[i + sep.len()..],
         )
         .unwrap();
-        let src = mapc::mapfile::load_yaml(&dir.path().join("map.yaml"))
+        let src = mapc::compiler::mapfile::load_yaml(&dir.path().join("map.yaml"))
             .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
         assert!(src.grid.free_count() > 0);
     }
@@ -191,7 +191,7 @@ fn mapfile_seeds_load() {
 
 #[test]
 fn scanio_seeds_yield_scans() {
-    use mapc::scanio::{open_input, read_scans, InputFormat, ReadOptions};
+    use mapc::tools::scanio::{open_input, read_scans, InputFormat, ReadOptions};
     for p in corpus("scanio") {
         let reader = open_input(&p.to_string_lossy()).unwrap();
         let ok = read_scans(reader, InputFormat::Auto, &ReadOptions::default())
@@ -220,8 +220,8 @@ fn replay_cdr_corpus() {
 /// name; the cut one ends with the end-of-bag error.
 #[test]
 fn bag_seeds_yield_scans() {
-    use mapc::scanio::bag::{open_bag, BagError};
-    use mapc::scanio::ReadOptions;
+    use mapc::tools::scanio::bag::{open_bag, BagError};
+    use mapc::tools::scanio::ReadOptions;
     for p in corpus("bag") {
         let name = p.file_name().unwrap().to_string_lossy().into_owned();
         match (name.as_str(), open_bag(&p, None)) {
@@ -243,7 +243,7 @@ fn bag_seeds_yield_scans() {
 #[test]
 fn cdr_seeds_decode() {
     for p in corpus("cdr") {
-        let m = mapc::scanio::cdr::decode_laser_scan(&read(&p), 1000);
+        let m = mapc::tools::scanio::cdr::decode_laser_scan(&read(&p), 1000);
         assert!(m.is_ok(), "{}: {m:?}", p.display());
     }
 }
@@ -294,13 +294,13 @@ fn refdb_unused_window_layout_keeps_scratch_size_sane() {
 /// before any pixel data was read: 4.2 GB for a 64 KB file (libFuzzer:
 /// `out-of-memory (malloc(4232000000))`).
 ///
-/// Fixed in `mapc::mapfile`: the lower bound on the file size uses the bits
+/// Fixed in `mapc::compiler::mapfile`: the lower bound on the file size uses the bits
 /// per pixel the IHDR declares (colour type x bit depth: 64 here, so at
 /// least 4.1 MB), and the pixel buffer is allocated fallibly by the loader.
 /// The largest map-size limit (`--max-cells 2147483648`): the file-size
 /// bounds are tested behind it.
-const WIDEST: mapc::mapfile::MapLimits = mapc::mapfile::MapLimits {
-    max_cells: mapc::mapfile::MAX_CELLS,
+const WIDEST: mapc::compiler::mapfile::MapLimits = mapc::compiler::mapfile::MapLimits {
+    max_cells: mapc::compiler::mapfile::MAX_CELLS,
 };
 
 #[test]
@@ -320,9 +320,10 @@ fn mapfile_png_header_cannot_reserve_gigabytes() {
     LARGEST.with(|c| c.set(0));
     // Beyond the default --max-cells (refused from the header): loaded
     // with the largest limit, so the file-size bound behind it is tested.
-    let e = mapc::mapfile::load_image_within(&image, Some(0.05), None, &WIDEST).unwrap_err();
+    let e =
+        mapc::compiler::mapfile::load_image_within(&image, Some(0.05), None, &WIDEST).unwrap_err();
     assert!(
-        matches!(e, mapc::mapfile::MapError::ImageDecode { .. })
+        matches!(e, mapc::compiler::mapfile::MapError::ImageDecode { .. })
             && e.to_string()
                 .contains("truncated: the header claims 23000 x 23000"),
         "{e}"
@@ -370,7 +371,7 @@ fn mapfile_png_allocation_is_bounded_by_the_file_size() {
             std::fs::write(&image, &f).unwrap();
             LARGEST.with(|c| c.set(0));
             let r = std::panic::catch_unwind(|| {
-                mapc::mapfile::load_image_within(&image, Some(0.05), None, &WIDEST)
+                mapc::compiler::mapfile::load_image_within(&image, Some(0.05), None, &WIDEST)
             });
             let largest = LARGEST.with(Cell::get);
             let what = format!("colour {colour} depth {depth}, {side} x {side} in {len} bytes");
@@ -378,7 +379,7 @@ fn mapfile_png_allocation_is_bounded_by_the_file_size() {
                 .unwrap_or_else(|_| panic!("{what}: panicked"))
                 .unwrap_err();
             assert!(
-                matches!(e, mapc::mapfile::MapError::ImageDecode { .. }),
+                matches!(e, mapc::compiler::mapfile::MapError::ImageDecode { .. }),
                 "{what}: {e}"
             );
             let decoded = side as u64 * side as u64 * out;
@@ -439,7 +440,7 @@ fn scanio_increment_near_a_full_turn_round_trips() {
 /// the harness accepts this one-ulp difference so the fuzzer can go on.
 #[test]
 fn scanio_truth_round_trips_bit_for_bit() {
-    use mapc::scanio::{read_scans, scan_to_json, InputFormat, ReadOptions};
+    use mapc::tools::scanio::{read_scans, scan_to_json, InputFormat, ReadOptions};
     let data = read(&finding("scanio", "truth-f64-not-bit-exact"));
     let opts = ReadOptions::default();
     let scan = read_scans(&data[..], InputFormat::Carmen, &opts)
@@ -468,12 +469,12 @@ fn scanio_truth_within_one_ulp_replays() {
 /// its first second, 201 executions): a 256-byte bag whose header record's
 /// profile string claims 4,294,639,620 bytes; the mcap crate reserved that
 /// much before reading the string (libFuzzer: `malloc(4294639620)`). Fixed
-/// by `check_string_lengths` in `mapc::scanio::bag`: an error naming the
+/// by `check_string_lengths` in `mapc::tools::scanio::bag`: an error naming the
 /// record, checked before the record is parsed.
 #[test]
 fn bag_string_longer_than_its_record_is_not_allocated() {
     replay(&finding("bag", "header-string-4gib-alloc"), harness::bag);
-    let e = mapc::scanio::bag::open_bag(&finding("bag", "header-string-4gib-alloc"), None)
+    let e = mapc::tools::scanio::bag::open_bag(&finding("bag", "header-string-4gib-alloc"), None)
         .unwrap_err()
         .to_string();
     assert!(

@@ -43,8 +43,9 @@ fn every_golden_version_is_read_or_rejected_clearly() {
                 // Localize a scan simulated at the first site with a 30 degree heading.
                 let p = db.site_xy(0);
                 let truth = refloc::Pose2::new(p[0] + 0.3, p[1] - 0.2, 0.5);
-                let lidar = mapc::sim::Lidar::new(362, 2.0 * std::f32::consts::PI, 30.0);
-                let ranges = mapc::sim::virtual_scan(&db.grid(), &db.frame(), &truth, &lidar);
+                let lidar = mapc::compiler::sim::Lidar::new(362, 2.0 * std::f32::consts::PI, 30.0);
+                let ranges =
+                    mapc::compiler::sim::virtual_scan(&db.grid(), &db.frame(), &truth, &lidar);
                 let mut scratch = vec![0u8; refloc::scratch_size(db.params(), ranges.len())];
                 let scan = refloc::Scan::Ranges(refloc::RangeScan {
                     angle_min: lidar.angle_min,

@@ -27,10 +27,10 @@ mod common;
 
 use std::f32::consts::PI;
 
-use mapc::mapfile::{self, Cell, MapError, MapSource, OccupancyGrid};
-use mapc::pipeline::{self, BuildConfig};
-use mapc::rng::Rng;
-use mapc::sim::{self, Lidar};
+use mapc::compiler::mapfile::{self, Cell, MapError, MapSource, OccupancyGrid};
+use mapc::compiler::pipeline::{self, BuildConfig};
+use mapc::compiler::rng::Rng;
+use mapc::compiler::sim::{self, Lidar};
 use refloc::{localize, scratch_size, LocalizeError, Pose2, RangeScan, RefDb, Scan};
 
 /// Guard bytes on either side of the scratch.

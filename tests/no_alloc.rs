@@ -197,9 +197,9 @@ fn localize_does_not_allocate_on_a_synthetic_office() {
 #[test]
 fn localize_does_not_allocate_with_a_coarse_search_index() {
     let dir = tempfile::tempdir().expect("temporary directory");
-    let cfg = mapc::pipeline::BuildConfig {
+    let cfg = mapc::compiler::pipeline::BuildConfig {
         fit_queries: 20,
-        index: mapc::index::IndexOptions {
+        index: mapc::compiler::index::IndexOptions {
             min_sites: 1,
             leaf_size: 4,
             leaves: 8,
@@ -234,7 +234,7 @@ fn localize_does_not_allocate_on_the_intel_map() {
         );
         return;
     }
-    let src = mapc::mapfile::load_yaml(yaml).expect("load the Intel map");
+    let src = mapc::compiler::mapfile::load_yaml(yaml).expect("load the Intel map");
     let db = common::build(src, 20);
     let rdb = db.open();
     println!(

@@ -1,7 +1,7 @@
 //! Output safety of `mapc build`: writing a database into a directory the
 //! process may not write fails with a clear error and a non-zero exit, and a
 //! good database already there stays byte for byte as it was (the writer's
-//! simulated mid-write failure is a unit test in `crates/mapc/src/writer.rs`).
+//! simulated mid-write failure is a unit test in `crates/mapc/src/compiler/writer.rs`).
 //!
 //! Permissions only bind an unprivileged process: root (uid 0, as in this
 //! project's containers and some CI runners) writes into a `chmod 0555`

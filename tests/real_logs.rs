@@ -4,7 +4,7 @@
 //! - Every scan of the CSAIL CARMEN log (406 scans, 180 degrees, 361 beams)
 //!   against the compiled CSAIL map, compared with the poses in
 //!   `csail-poses-in-map.txt`, and with those poses corrected locally
-//!   against the map (`mapc::eval::correct_truth_locally`: the given poses
+//!   against the map (`mapc::tools::eval::correct_truth_locally`: the given poses
 //!   come from another SLAM run than the map, and 19 of them are off by
 //!   more than the tolerance where the map places the scan unambiguously).
 //!   Measured when the bounds were set: 91.1% accepted and correct against
@@ -20,7 +20,7 @@
 
 mod common;
 
-use mapc::scanio::{self, InputFormat, ReadOptions, ScanData};
+use mapc::tools::scanio::{self, InputFormat, ReadOptions, ScanData};
 use rayon::prelude::*;
 use refloc::{localize, scratch_size, RangeScan, Scan};
 
@@ -52,7 +52,7 @@ fn real_log(name: &str, beams: usize, every: usize) -> Option<LogResult> {
     ) else {
         return None;
     };
-    let built = common::build(mapc::mapfile::load_yaml(&map).unwrap(), 150);
+    let built = common::build(mapc::compiler::mapfile::load_yaml(&map).unwrap(), 150);
     let db = built.open();
 
     let truth: std::collections::HashMap<usize, [f64; 3]> = scanio::read_poses_in_map(&truth)
@@ -102,8 +102,8 @@ fn real_log(name: &str, beams: usize, every: usize) -> Option<LogResult> {
             let beams = s.data.beams();
             let sensor = refloc::Pose2::new(g[0] as f32, g[1] as f32, g[2] as f32)
                 .compose(&db.params().sensor.offset);
-            let c = mapc::eval::correct_truth_locally(&db, &beams, sensor);
-            let truth_off = !mapc::eval::within_tolerance(&c, g);
+            let c = mapc::tools::eval::correct_truth_locally(&db, &beams, sensor);
+            let truth_off = !mapc::tools::eval::within_tolerance(&c, g);
             let c = [c.x as f64, c.y as f64, c.theta as f64];
             match localize(&db, &scan, &mut scratch) {
                 Ok(l) => {
@@ -122,9 +122,9 @@ fn real_log(name: &str, beams: usize, every: usize) -> Option<LogResult> {
                     if let Some(c) = l.covariance {
                         assert!(c[0] > 0.0 && c[4] > 0.0 && c[8] > 0.0 && c[1] == c[3]);
                     }
-                    let ok = mapc::eval::within_tolerance(&l.pose, g);
-                    let (e, _) = mapc::eval::pose_error(&l.pose, g);
-                    let ok_c = mapc::eval::within_tolerance(&l.pose, c);
+                    let ok = mapc::tools::eval::within_tolerance(&l.pose, g);
+                    let (e, _) = mapc::tools::eval::pose_error(&l.pose, g);
+                    let ok_c = mapc::tools::eval::within_tolerance(&l.pose, c);
                     (
                         l.accepted && ok,
                         l.accepted && !ok,
@@ -226,16 +226,16 @@ fn scans_of_another_map_are_not_accepted() {
     ) else {
         return;
     };
-    let built = common::build(mapc::mapfile::load_yaml(&intel).unwrap(), 150);
+    let built = common::build(mapc::compiler::mapfile::load_yaml(&intel).unwrap(), 150);
     let db = built.open();
     // 360-degree, 362-beam scans simulated at free poses of the ACES map.
-    let foreign = mapc::mapfile::load_yaml(&aces).unwrap();
+    let foreign = mapc::compiler::mapfile::load_yaml(&aces).unwrap();
     let g = &foreign.grid;
     let bits = g.blocked_bits(true);
     let grid = refloc::raycast::BitGrid::new(g.width, g.height, &bits).unwrap();
     let frame = g.frame();
-    let df = mapc::edt::DistanceField::from_grid(g, true);
-    let poses = mapc::eval::sample_poses_where(
+    let df = mapc::compiler::edt::DistanceField::from_grid(g, true);
+    let poses = mapc::tools::eval::sample_poses_where(
         g.width,
         g.height,
         &frame,
@@ -243,11 +243,11 @@ fn scans_of_another_map_are_not_accepted() {
         300,
         7,
     );
-    let lidar = mapc::sim::Lidar::new(362, std::f32::consts::TAU, 30.0);
+    let lidar = mapc::compiler::sim::Lidar::new(362, std::f32::consts::TAU, 30.0);
     let accepted: Vec<bool> = poses
         .par_iter()
         .map(|p| {
-            let ranges = mapc::sim::virtual_scan(&grid, &frame, p, &lidar);
+            let ranges = mapc::compiler::sim::virtual_scan(&grid, &frame, p, &lidar);
             let scan = Scan::Ranges(RangeScan {
                 angle_min: lidar.angle_min,
                 angle_increment: lidar.angle_increment,
@@ -276,10 +276,10 @@ fn symmetric_map_is_not_accepted_at_the_twin_place() {
     let Some(map) = mapc::testdata::shared("maps/tb3-world/tb3-world.yaml") else {
         return;
     };
-    let built = common::build(mapc::mapfile::load_yaml(&map).unwrap(), 150);
+    let built = common::build(mapc::compiler::mapfile::load_yaml(&map).unwrap(), 150);
     let db = built.open();
-    let poses = mapc::eval::sample_poses(&db, 200, 0.3, 1);
-    let spec = mapc::eval::ScanSpec {
+    let poses = mapc::tools::eval::sample_poses(&db, 200, 0.3, 1);
+    let spec = mapc::tools::eval::ScanSpec {
         beams: 362,
         fov: std::f32::consts::TAU,
         range_max: 30.0,
@@ -290,8 +290,8 @@ fn symmetric_map_is_not_accepted_at_the_twin_place() {
         prior_radius: 0.0,
         prior_heading_tol: 0.0,
     };
-    let trials = mapc::eval::run_e4(&db, &poses, &spec, 1, None, &|| {});
-    let s = mapc::eval::summarize(&trials);
+    let trials = mapc::tools::eval::run_e4(&db, &poses, &spec, 1, None, &|| {});
+    let s = mapc::tools::eval::summarize(&trials);
     eprintln!(
         "tb3-world: {} of {} accepted and correct, {} false accepts",
         s.correct, s.n, s.false_accepts

@@ -21,7 +21,7 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use criterion::{BenchmarkId, Criterion, SamplingMode};
-use mapc::rng::Rng;
+use mapc::compiler::rng::Rng;
 use refloc::{localize, scratch_size, Localizer, Pose2, RefDb};
 use refloc_bench::{
     candidates, median, quantile, query_stats, scan_set, Condition, Database, Kind, Query, Work,

@@ -2,12 +2,12 @@
 //! the instruction-count driver (`src/bin/query-count.rs`).
 //!
 //! - [`Database`]: the Intel Research Lab map (`shared/maps/intel/intel.yaml`)
-//!   compiled with `mapc::pipeline::build` and the default `BuildConfig`,
+//!   compiled with `mapc::compiler::pipeline::build` and the default `BuildConfig`,
 //!   encoded with `refloc::format::encode` into a 4-byte-aligned buffer. When
 //!   the shared data is absent, a synthetic 600 x 400 office
-//!   (`mapc::synth`, seed 0) is used instead and [`Database::origin`] says so.
+//!   (`mapc::tools::synth`, seed 0) is used instead and [`Database::origin`] says so.
 //! - [`scan_set`]: a fixed set of [`SCAN_COUNT`] simulated scans at seeded
-//!   free poses (`mapc::eval::sample_poses`, clearance 0.3 m, seed
+//!   free poses (`mapc::tools::eval::sample_poses`, clearance 0.3 m, seed
 //!   [`POSE_SEED`]) for each [`Kind`] of scanner, static (exact ranges) or
 //!   dynamic (5 mm range noise and 60 random short returns, as `mapc eval`).
 //! - [`Work`]: an owned scratch for a `refloc::Localizer`, whose stages
@@ -16,12 +16,12 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use mapc::eval;
-use mapc::mapfile::{self, MapSource};
-use mapc::pipeline::{self, BuildConfig};
-use mapc::rng::Rng;
-use mapc::sim::{self, Lidar};
-use mapc::synth::{self, SynthKind, SynthOptions};
+use mapc::compiler::mapfile::{self, MapSource};
+use mapc::compiler::pipeline::{self, BuildConfig};
+use mapc::compiler::rng::Rng;
+use mapc::compiler::sim::{self, Lidar};
+use mapc::tools::eval;
+use mapc::tools::synth::{self, SynthKind, SynthOptions};
 use refloc::verify;
 use refloc::{localize, scratch_size, Localizer, Pose2, RangeScan, RefDb, Scan};
 
@@ -148,7 +148,7 @@ impl Database {
                 let (src, tmp) = synthetic_office()?;
                 (
                     src,
-                    "SYNTHETIC office 600 x 400 cells (mapc::synth, seed 0): \
+                    "SYNTHETIC office 600 x 400 cells (mapc::tools::synth, seed 0): \
                      shared/maps/intel/intel.yaml not found, numbers are NOT the Intel map's"
                         .to_string(),
                     Some(tmp),
@@ -249,7 +249,7 @@ impl Query {
 }
 
 /// The fixed scan set of `kind` under `cond`: `n` scans at the first `n`
-/// poses of `mapc::eval::sample_poses(db, n, CLEARANCE, POSE_SEED)`.
+/// poses of `mapc::tools::eval::sample_poses(db, n, CLEARANCE, POSE_SEED)`.
 /// Deterministic.
 pub fn scan_set<D: AsRef<[u8]>>(
     db: &RefDb<D>,

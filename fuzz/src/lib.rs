@@ -17,10 +17,12 @@ use std::io::Cursor;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Once};
 
-use mapc::mapfile::{load_image, load_yaml};
-use mapc::scanio::bag::open_bag_bytes;
-use mapc::scanio::cdr::{decode_laser_scan, LaserScanMsg, Writer as CdrWriter};
-use mapc::scanio::{open_input, read_scans, scan_to_json, InputFormat, ReadOptions, ScanData};
+use mapc::compiler::mapfile::{load_image, load_yaml};
+use mapc::tools::scanio::bag::open_bag_bytes;
+use mapc::tools::scanio::cdr::{decode_laser_scan, LaserScanMsg, Writer as CdrWriter};
+use mapc::tools::scanio::{
+    open_input, read_scans, scan_to_json, InputFormat, ReadOptions, ScanData,
+};
 use refloc::format::{
     header_crc, Header, ENDIAN_CHECK, ENTRY_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, MAX_SECTIONS,
 };
@@ -343,7 +345,7 @@ pub fn mapfile(data: &[u8]) {
 
 /// invariant: a loaded grid is consistent (cell count, resolution, at least
 /// one free cell).
-fn check_map(g: &mapc::mapfile::OccupancyGrid) {
+fn check_map(g: &mapc::compiler::mapfile::OccupancyGrid) {
     assert_eq!(
         g.cells.len() as u64,
         g.width as u64 * g.height as u64,
@@ -544,7 +546,7 @@ pub const BAG_TOPIC: &str = "/scan";
 /// (libFuzzer's, which aborts). The bag reader runs the mcap reader under
 /// `catch_unwind` and turns its panics (arithmetic overflow on a crafted
 /// chunk, with debug assertions) into an error, by design
-/// (`RecordStream::next` in `mapc::scanio::bag`); libFuzzer's hook would
+/// (`RecordStream::next` in `mapc::tools::scanio::bag`); libFuzzer's hook would
 /// abort on them before they are caught. A panic anywhere else, the CDR
 /// decoder and the reader's own code included, still counts.
 fn let_the_bag_reader_catch_mcap_panics() {

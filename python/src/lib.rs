@@ -139,8 +139,8 @@ impl RefDb {
                 "beams must be 3..=65536, fov in (0, 2 pi] rad, range_max > 0 m",
             ));
         }
-        let lidar = mapc::sim::Lidar::new(beams, fov, range_max);
-        let ranges = mapc::sim::virtual_scan(
+        let lidar = mapc::compiler::sim::Lidar::new(beams, fov, range_max);
+        let ranges = mapc::compiler::sim::virtual_scan(
             &self.db.grid(),
             &self.db.frame(),
             &refloc::Pose2::new(x, y, theta),
@@ -576,7 +576,7 @@ fn build(
     accept_confidence: f32,
 ) -> PyResult<usize> {
     py.detach(|| {
-        let cfg = mapc::pipeline::BuildConfig {
+        let cfg = mapc::compiler::pipeline::BuildConfig {
             beams,
             range_max,
             seed,
@@ -584,21 +584,21 @@ fn build(
             ..Default::default()
         };
         cfg.params().map_err(BuildError::new_err)?;
-        mapc::writer::check_output_path(&out_path, &[&map_yaml])
+        mapc::compiler::writer::check_output_path(&out_path, &[&map_yaml])
             .map_err(|e| PyOSError::new_err(format!("{}: {e}", out_path.display())))?;
-        let src = mapc::mapfile::load_yaml(&map_yaml)
+        let src = mapc::compiler::mapfile::load_yaml(&map_yaml)
             .map_err(|e| BuildError::new_err(format!("{}: {e}", map_yaml.display())))?;
         // The image the YAML names is an input too.
-        mapc::writer::check_output_path(&out_path, &src.input_files())
+        mapc::compiler::writer::check_output_path(&out_path, &src.input_files())
             .map_err(|e| PyOSError::new_err(format!("{}: {e}", out_path.display())))?;
-        let built = mapc::pipeline::build(&src, &cfg)
+        let built = mapc::compiler::pipeline::build(&src, &cfg)
             .map_err(|e| BuildError::new_err(format!("{}: {e}", map_yaml.display())))?;
         let secs: Vec<_> = built
             .sections
             .iter()
             .map(|(k, b)| (*k, b.as_slice()))
             .collect();
-        mapc::writer::write_refdb(&out_path, &secs)
+        mapc::compiler::writer::write_refdb(&out_path, &secs)
             .map_err(|e| PyOSError::new_err(format!("{}: {e}", out_path.display())))?;
         Ok(built.sites.len())
     })

@@ -6,11 +6,11 @@
 use std::path::Path;
 use std::time::Instant;
 
-use mapc::mapfile::{self, Cell, MapSource};
-use mapc::pipeline::{self, BuildConfig};
-use mapc::rng::Rng;
-use mapc::sim::{self, Lidar, Noise};
-use mapc::synth::{self, SynthKind, SynthOptions};
+use mapc::compiler::mapfile::{self, Cell, MapSource};
+use mapc::compiler::pipeline::{self, BuildConfig};
+use mapc::compiler::rng::Rng;
+use mapc::compiler::sim::{self, Lidar, Noise};
+use mapc::tools::synth::{self, SynthKind, SynthOptions};
 use refloc::format::SectionKind;
 use refloc::{Pose2, RangeScan, RefDb, Scan};
 
@@ -237,12 +237,12 @@ pub fn jsonl_scans(db_file: &[u8], n: usize, seed: u64) -> (Vec<Pose2>, String) 
     zerocopy::IntoBytes::as_mut_bytes(&mut words[..])[..db_file.len()].copy_from_slice(db_file);
     let db = RefDb::new(&zerocopy::IntoBytes::as_bytes(&words[..])[..db_file.len()])
         .expect("a database built by mapc reads");
-    let poses = mapc::eval::sample_poses(&db, n, 0.4, seed);
+    let poses = mapc::tools::eval::sample_poses(&db, n, 0.4, seed);
     let lidar = Lidar::new(362, 2.0 * std::f32::consts::PI, 30.0);
     let mut lines = String::new();
     for (k, p) in poses.iter().enumerate() {
         let ranges = sim::virtual_scan(&db.grid(), &db.frame(), p, &lidar);
-        let data = mapc::scanio::ScanData::Ranges {
+        let data = mapc::tools::scanio::ScanData::Ranges {
             angle_min: lidar.angle_min,
             angle_increment: lidar.angle_increment,
             range_min: 0.0,
@@ -252,7 +252,11 @@ pub fn jsonl_scans(db_file: &[u8], n: usize, seed: u64) -> (Vec<Pose2>, String) 
                 .map(|r| if r.is_finite() { *r } else { f32::NAN })
                 .collect(),
         };
-        lines.push_str(&mapc::scanio::scan_to_json(&data, &format!("s{k}"), None));
+        lines.push_str(&mapc::tools::scanio::scan_to_json(
+            &data,
+            &format!("s{k}"),
+            None,
+        ));
         lines.push('\n');
     }
     (poses, lines)

@@ -1,6 +1,6 @@
 //! Property tests (proptest) of the compiler's map kernels: random inputs,
 //! and on failure a shrunk counterexample. The seeded tests next to the code
-//! (`src/edt/tests.rs`, `src/mapfile/tests.rs`) cover fixed sizes and
+//! (`src/compiler/edt/tests.rs`, `src/compiler/mapfile/tests.rs`) cover fixed sizes and
 //! densities; these add random shapes (scattered cells plus rectangles and
 //! lines, which exercise the lower envelope differently from noise).
 //!
@@ -14,8 +14,8 @@
 //! Case counts are kept small (the whole suite runs in CI on 2 cores); set
 //! `PROPTEST_CASES` for a longer run.
 
-use mapc::edt::{self, DistanceField, NONE};
-use mapc::mapfile::{self, Cell, OccupancyGrid};
+use mapc::compiler::edt::{self, DistanceField, NONE};
+use mapc::compiler::mapfile::{self, Cell, OccupancyGrid};
 use proptest::collection::vec;
 use proptest::prelude::*;
 
@@ -49,7 +49,7 @@ fn mask() -> impl Strategy<Value = (usize, usize, Vec<bool>)> {
     })
 }
 
-use mapc::edt::brute_force_sq as brute;
+use mapc::compiler::edt::brute_force_sq as brute;
 
 /// Checks a feature transform against the squared distances `want`.
 fn check_nearest(

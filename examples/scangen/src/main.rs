@@ -21,9 +21,9 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use mapc::eval::{sample_poses, CORRECT_POS, CORRECT_THETA};
-use mapc::rng::Rng;
-use mapc::sim::{add_noise, virtual_scan, Lidar, Noise};
+use mapc::compiler::rng::Rng;
+use mapc::compiler::sim::{add_noise, virtual_scan, Lidar, Noise};
+use mapc::tools::eval::{sample_poses, CORRECT_POS, CORRECT_THETA};
 use refloc::format::SectionKind;
 use refloc::{localize, scratch_size, wrap_angle, Pose2, RangeScan, RefDb, Scan};
 

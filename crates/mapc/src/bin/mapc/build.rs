@@ -4,8 +4,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use mapc::mapfile;
-use mapc::pipeline::{self, BuildConfig};
+use mapc::compiler::mapfile;
+use mapc::compiler::pipeline::{self, BuildConfig};
 use refloc::Selection;
 
 use crate::util::{fail_err, input_err, parse_triple, CliResult, Ui};
@@ -139,16 +139,16 @@ pub struct BuildOpts {
     #[arg(long, value_name = "P", default_value_t = refloc::Decision::DEFAULT.threshold)]
     pub accept_confidence: f32,
     /// Build the coarse-search index (sublinear ranking of the sites) for maps with at least this many sites; smaller maps are ranked exhaustively.
-    #[arg(long, value_name = "SITES", default_value_t = mapc::index::IndexOptions::default().min_sites)]
+    #[arg(long, value_name = "SITES", default_value_t = mapc::compiler::index::IndexOptions::default().min_sites)]
     pub index_min_sites: usize,
     /// Coarse-search index: internal nodes kept per level of the search (1-32; more: better recall, slower).
-    #[arg(long, value_name = "NODES", default_value_t = mapc::index::IndexOptions::default().beam)]
+    #[arg(long, value_name = "NODES", default_value_t = mapc::compiler::index::IndexOptions::default().beam)]
     pub index_beam: u32,
     /// Coarse-search index: leaves whose sites are scored exactly (1-64; more: better recall, slower).
-    #[arg(long, value_name = "LEAVES", default_value_t = mapc::index::IndexOptions::default().leaves)]
+    #[arg(long, value_name = "LEAVES", default_value_t = mapc::compiler::index::IndexOptions::default().leaves)]
     pub index_leaves: u32,
     /// Coarse-search index: a tree node with at most this many sites (or site headings) is a leaf.
-    #[arg(long, value_name = "ENTRIES", default_value_t = mapc::index::IndexOptions::default().leaf_size)]
+    #[arg(long, value_name = "ENTRIES", default_value_t = mapc::compiler::index::IndexOptions::default().leaf_size)]
     pub index_leaf_size: usize,
     #[command(flatten)]
     pub db_limit: DbLimitArgs,
@@ -185,7 +185,7 @@ pub struct DbLimitArgs {
     #[arg(
         long,
         value_name = "BYTES",
-        default_value_t = mapc::compile::DEFAULT_MAX_DB_BYTES,
+        default_value_t = mapc::compiler::compile::DEFAULT_MAX_DB_BYTES,
         hide_default_value = true,
         value_parser = clap::value_parser!(u64).range(1..)
     )]
@@ -223,7 +223,7 @@ impl BuildOpts {
             through_run: self.through_run.unwrap_or(d.through_run),
             occlusion_fit: self.occlusion_fit.unwrap_or(d.occlusion_fit),
             accept_confidence: self.accept_confidence,
-            index: mapc::index::IndexOptions {
+            index: mapc::compiler::index::IndexOptions {
                 min_sites: self.index_min_sites,
                 beam: self.index_beam,
                 leaves: self.index_leaves,
@@ -290,14 +290,14 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     // otherwise report "." or a device as unwritable), and after loading
     // against the image and YAML the map names.
     let refuse_out = |e: std::io::Error| input_err(anyhow::anyhow!("-o {}: {e}", out.display()));
-    mapc::writer::check_output_path(&out, &[&a.map]).map_err(refuse_out)?;
-    mapc::writer::check_writable(&out)
+    mapc::compiler::writer::check_output_path(&out, &[&a.map]).map_err(refuse_out)?;
+    mapc::compiler::writer::check_writable(&out)
         .map_err(|e| fail_err(anyhow::anyhow!("{}: cannot write: {e}", out.display())))?;
     let sp = ui.stage("loading map");
     let mut laps = pipeline::Laps::start();
     let src = load_map(&a.map, a.resolution, a.origin, &a.limits).map_err(input_err)?;
     // The image (and the YAML) the map named are inputs too.
-    mapc::writer::check_output_path(&out, &src.input_files()).map_err(refuse_out)?;
+    mapc::compiler::writer::check_output_path(&out, &src.input_files()).map_err(refuse_out)?;
     laps.lap("load");
     sp.set_message("compiling");
     let mut built = pipeline::build(&src, &cfg)
@@ -312,7 +312,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     // The writer reads the new file back and verifies it before it takes
     // the name: a database that would not load is refused (exit 2, the
     // input made it) and an old file under `out` stays as it was.
-    let size = mapc::writer::write_refdb(&out, &secs).map_err(|e| {
+    let size = mapc::compiler::writer::write_refdb(&out, &secs).map_err(|e| {
         let err = anyhow::anyhow!("{}: {e}", out.display());
         if e.kind() == std::io::ErrorKind::InvalidData {
             input_err(err.context(format!("{}: not compiled", a.map.display())))

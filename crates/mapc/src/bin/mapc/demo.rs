@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use mapc::pipeline;
+use mapc::compiler::pipeline;
 
 use crate::build::{load_map, BuildOpts, DbLimitArgs, MapLimitArgs, SelectionArg};
 use crate::eval::Experiment;
@@ -66,7 +66,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
 /// The demo's map compiled into `--out`.
 struct Compiled {
     /// The map it was compiled from.
-    src: mapc::mapfile::MapSource,
+    src: mapc::compiler::mapfile::MapSource,
     built: pipeline::BuildOutput,
     /// Where the database is.
     db_path: PathBuf,
@@ -94,7 +94,7 @@ fn compile(a: &Args) -> Result<Compiled, crate::util::CliError> {
         .iter()
         .map(|(k, b)| (*k, b.as_slice()))
         .collect();
-    let size = mapc::writer::write_refdb(&db_path, &secs)
+    let size = mapc::compiler::writer::write_refdb(&db_path, &secs)
         .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", db_path.display())))?;
     let build_s = t0.elapsed().as_secs_f64();
     Ok(Compiled {
@@ -134,10 +134,10 @@ fn build_opts(a: &Args) -> BuildOpts {
         through_run: None,
         occlusion_fit: None,
         accept_confidence: refloc::Decision::DEFAULT.threshold,
-        index_min_sites: mapc::index::IndexOptions::default().min_sites,
-        index_beam: mapc::index::IndexOptions::default().beam,
-        index_leaves: mapc::index::IndexOptions::default().leaves,
-        index_leaf_size: mapc::index::IndexOptions::default().leaf_size,
+        index_min_sites: mapc::compiler::index::IndexOptions::default().min_sites,
+        index_beam: mapc::compiler::index::IndexOptions::default().beam,
+        index_leaves: mapc::compiler::index::IndexOptions::default().leaves,
+        index_leaf_size: mapc::compiler::index::IndexOptions::default().leaf_size,
         db_limit: a.db_limit.clone(),
     }
 }

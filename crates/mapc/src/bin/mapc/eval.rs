@@ -5,9 +5,9 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use mapc::eval::{self, ScanSpec, Summary, Tolerance, Trial};
-use mapc::figures;
-use mapc::rng::Rng;
+use mapc::compiler::rng::Rng;
+use mapc::tools::eval::{self, ScanSpec, Summary, Tolerance, Trial};
+use mapc::tools::figures;
 use serde_json::{json, Value};
 
 use crate::util::outln;
@@ -31,7 +31,7 @@ pub enum Experiment {
     /// Every class of the disturbance suite.
     Disturbances,
     /// One class of the disturbance suite.
-    Disturbance(mapc::disturb::Class),
+    Disturbance(mapc::tools::disturb::Class),
 }
 
 impl Experiment {
@@ -45,16 +45,17 @@ impl Experiment {
         Experiment::Disturbances,
     ];
     /// Every value, the disturbance classes in `disturb::Class::ALL` order.
-    const ALL: [Experiment; Self::PAPER.len() + mapc::disturb::Class::ALL.len()] = {
-        let mut all = [Experiment::Static; Self::PAPER.len() + mapc::disturb::Class::ALL.len()];
+    const ALL: [Experiment; Self::PAPER.len() + mapc::tools::disturb::Class::ALL.len()] = {
+        let mut all =
+            [Experiment::Static; Self::PAPER.len() + mapc::tools::disturb::Class::ALL.len()];
         let mut i = 0;
         while i < Self::PAPER.len() {
             all[i] = Self::PAPER[i];
             i += 1;
         }
         let mut k = 0;
-        while k < mapc::disturb::Class::ALL.len() {
-            all[i + k] = Experiment::Disturbance(mapc::disturb::Class::ALL[k]);
+        while k < mapc::tools::disturb::Class::ALL.len() {
+            all[i + k] = Experiment::Disturbance(mapc::tools::disturb::Class::ALL[k]);
             k += 1;
         }
         all
@@ -203,7 +204,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     let report_path = a.out.join("report.json");
     let mut inputs: Vec<&std::path::Path> = vec![&a.db];
     inputs.extend(a.check.as_deref());
-    mapc::writer::check_output_path(&report_path, &inputs)
+    mapc::compiler::writer::check_output_path(&report_path, &inputs)
         .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", report_path.display())))?;
     let report = evaluate(&a, ui)?;
     std::fs::create_dir_all(&a.out)
@@ -372,7 +373,7 @@ impl Evaluation<'_> {
             (Experiment::DynamicSwap, self.spec(a.noise, 0, a.outliers)),
         ]
         .into_iter()
-        .chain(mapc::disturb::Class::ALL.map(|c| {
+        .chain(mapc::tools::disturb::Class::ALL.map(|c| {
             (
                 Experiment::Disturbance(c),
                 ScanSpec {
@@ -460,7 +461,7 @@ impl Evaluation<'_> {
         let bg = refloc::raycast::BitGrid::new(g.width, g.height, &bits)
             .ok_or_else(|| input_err(anyhow::anyhow!("grid")))?;
         let frame = g.frame();
-        let df = mapc::edt::DistanceField::from_grid(g, true);
+        let df = mapc::compiler::edt::DistanceField::from_grid(g, true);
         let fposes = eval::sample_poses_where(
             g.width,
             g.height,
@@ -711,7 +712,7 @@ fn dump_e4<D: AsRef<[u8]>>(
     dir: &std::path::Path,
     name: &str,
 ) -> Result<(), crate::util::CliError> {
-    use mapc::scanio::{scan_to_json, ScanData};
+    use mapc::tools::scanio::{scan_to_json, ScanData};
     let (grid, frame) = (db.grid(), db.frame());
     let lidar = spec.lidar();
     let (mut scans, mut truth) = (String::new(), String::new());

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use mapc::scanio::{self, InputFormat, ReadOptions, ScanData};
+use mapc::tools::scanio::{self, InputFormat, ReadOptions, ScanData};
 use refloc::scratch_size;
 use serde_json::json;
 
@@ -443,7 +443,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     let scans = scan_source(&a, ui)?;
     let rec = match &a.mcap {
         Some(p) => Some(Recorder {
-            rec: mapc::recording::Recording::create(p)
+            rec: mapc::tools::recording::Recording::create(p)
                 .map_err(|e| fail_err(anyhow::anyhow!("--mcap {}: {e}", p.display())))?,
             map_written: false,
         }),
@@ -563,7 +563,7 @@ impl Session {
             Ok(l) => {
                 let err = judged
                     .as_ref()
-                    .map(|j| mapc::eval::pose_error(&l.pose, j.truth));
+                    .map(|j| mapc::tools::eval::pose_error(&l.pose, j.truth));
                 self.tally.count(&l, judged.as_ref(), err);
                 let found = Found {
                     scan,
@@ -594,7 +594,7 @@ impl Session {
 
 /// The `--mcap` recording, and whether the map is in it yet.
 struct Recorder {
-    rec: mapc::recording::Recording,
+    rec: mapc::tools::recording::Recording,
     map_written: bool,
 }
 
@@ -617,7 +617,7 @@ impl Recorder {
             .map(|s| s.frame_id.as_str())
             .filter(|f| !f.is_empty())
             .unwrap_or("laser");
-        let at = mapc::recording::Stamp {
+        let at = mapc::tools::recording::Stamp {
             ns: at_ns,
             frame: frame_id,
         };
@@ -703,7 +703,7 @@ impl OneMap<'_> {
             v.vicinity_ratio() as f64
         };
         let truth_fit = fit(&sensor);
-        let refined = mapc::eval::correct_truth_locally(db, &beams, sensor);
+        let refined = mapc::tools::eval::correct_truth_locally(db, &beams, sensor);
         Some(Judged {
             truth,
             fit: truth_fit,
@@ -831,7 +831,7 @@ impl Tally {
         // Within the tolerance of the corrected truth.
         let ok_refined = judged.map(|j| {
             let r = j.refined;
-            mapc::eval::within_tolerance(&l.pose, [r.x as f64, r.y as f64, r.theta as f64])
+            mapc::tools::eval::within_tolerance(&l.pose, [r.x as f64, r.y as f64, r.theta as f64])
         });
         if let (Some(ok), true) = (ok_refined, l.accepted) {
             if ok {
@@ -843,7 +843,7 @@ impl Tally {
         let Some(j) = judged else {
             return;
         };
-        if l.accepted && mapc::eval::within_tolerance(&l.pose, j.truth) {
+        if l.accepted && mapc::tools::eval::within_tolerance(&l.pose, j.truth) {
             self.correct += 1;
             self.errs.extend(err.map(|(e, _)| e));
         } else if l.accepted {

@@ -5,9 +5,9 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use mapc::pipeline;
-use mapc::plot;
-use mapc::render::{color, Corner, MapCanvas, MapLayer, Mark};
+use mapc::compiler::pipeline;
+use mapc::tools::plot;
+use mapc::tools::render::{color, Corner, MapCanvas, MapLayer, Mark};
 
 use crate::build::{load_map, BuildOpts, MapLimitArgs};
 use crate::util::outln;
@@ -43,7 +43,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     if let Some(out) = &a.output {
         let mut inputs = src.input_files();
         inputs.push(&a.map);
-        mapc::writer::check_output_path(out, &inputs)
+        mapc::compiler::writer::check_output_path(out, &inputs)
             .map_err(|e| input_err(anyhow::anyhow!("-o {}: {e}", out.display())))?;
     }
     let cfg = BuildOpts {
@@ -74,9 +74,9 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     for cy in 0..h {
         for cx in 0..w {
             gray[((h - 1 - cy) * w + cx) as usize] = match g.get(cx, cy) {
-                mapc::mapfile::Cell::Free => 255,
-                mapc::mapfile::Cell::Occupied => 40,
-                mapc::mapfile::Cell::Unknown => 205,
+                mapc::compiler::mapfile::Cell::Free => 255,
+                mapc::compiler::mapfile::Cell::Occupied => 40,
+                mapc::compiler::mapfile::Cell::Unknown => 205,
             };
         }
     }
@@ -139,7 +139,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                 c.dot(ex, ey, 2.0, color::RED);
             }
         }
-        let hist = mapc::compile::scan_histogram(scan, &built.params);
+        let hist = mapc::compiler::compile::scan_histogram(scan, &built.params);
         let (rb, tb) = (
             built.params.coarse.hist_rho_bins as usize,
             built.params.coarse.hist_theta_bins as usize,

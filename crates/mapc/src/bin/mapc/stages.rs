@@ -18,9 +18,9 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-use mapc::edt::{self, DistanceField};
-use mapc::gvd::{self, GvdOptions};
-use mapc::mapfile::Cell;
+use mapc::compiler::edt::{self, DistanceField};
+use mapc::compiler::gvd::{self, GvdOptions};
+use mapc::compiler::mapfile::Cell;
 use serde_json::json;
 
 use crate::build::{load_map, BuildOpts, MapLimitArgs};

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use mapc::synth::{self, SynthKind, SynthOptions};
+use mapc::tools::synth::{self, SynthKind, SynthOptions};
 
 use crate::util::outln;
 use crate::util::{fail_err, input_err, parse_triple, CliResult, Ui};
@@ -78,7 +78,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         .unwrap_or_else(|| format!("{}-{}x{}-s{}", kind.as_str(), a.width, a.height, a.seed));
     for ext in ["pgm", "yaml"] {
         let f = a.out.join(format!("{name}.{ext}"));
-        mapc::writer::check_output_path(&f, &[])
+        mapc::compiler::writer::check_output_path(&f, &[])
             .map_err(|e| input_err(anyhow::anyhow!("{}: {e}", f.display())))?;
     }
     let (yaml, _) = synth::write_ros_map(&a.out, &name, &map, a.origin.unwrap_or([0.0; 3]))
