@@ -370,7 +370,57 @@ type Parsed = (
     Option<Decision>,
 );
 
+/// Checks a whole file, in the order of the steps below; the first failure
+/// is returned.
 fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
+    let (table, table_end) = parse_header(bytes)?;
+    let (ranges, crcs) = parse_table(table, table_end, bytes.len())?;
+    let sec = Sections {
+        bytes,
+        ranges: &ranges,
+    };
+    let (meta, params) = parse_records(&sec)?;
+    let n_sites = check_array_sizes(&sec, &meta, &params)?;
+    check_sites(&sec, n_sites)?;
+    check_memory_alignment(&sec)?;
+    crate::index::validate(sec.get(SectionKind::Index), &params, n_sites as usize)
+        .map_err(DbError::invalid)?;
+    let decision = parse_decision(&sec)?;
+    Ok((ranges, crcs, meta, params, decision))
+}
+
+/// The section byte ranges found by [`parse_table`], over the whole file.
+struct Sections<'a, 'r> {
+    bytes: &'a [u8],
+    ranges: &'r [Range<usize>; N_KINDS],
+}
+
+impl<'a> Sections<'a, '_> {
+    /// The bytes of section `k` (empty when an optional section is absent).
+    fn get(&self, k: SectionKind) -> &'a [u8] {
+        &self.bytes[self.ranges[kind_index(k)].clone()]
+    }
+
+    /// `Size` unless section `k` is exactly `want` bytes long.
+    fn exact(&self, k: SectionKind, want: usize) -> Result<(), DbError> {
+        let got = self.get(k).len();
+        if got == want {
+            Ok(())
+        } else {
+            Err(DbError::new(
+                DbErrorKind::Size,
+                k.name(),
+                want as u64,
+                got as u64,
+            ))
+        }
+    }
+}
+
+/// Step 1: magic, byte order, version, header length, section count, the
+/// header checksum and the file length. Returns the section table's bytes
+/// and where the table ends.
+fn parse_header(bytes: &[u8]) -> Result<(&[SectionEntry], usize), DbError> {
     use DbErrorKind::*;
     if cfg!(target_endian = "big") {
         return Err(DbError::new(HostEndian, "host", 0, 0));
@@ -451,7 +501,18 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
     }
     let table = <[SectionEntry]>::ref_from_bytes(table_bytes)
         .map_err(|_| DbError::new(Table, "section table", 0, 0))?;
+    Ok((table, table_end))
+}
 
+/// Step 2: every table entry names a known kind once, lies inside the file
+/// after the table, is aligned and overlaps no other; every required kind
+/// is present. Returns each kind's byte range and stored CRC.
+fn parse_table(
+    table: &[SectionEntry],
+    table_end: usize,
+    len: usize,
+) -> Result<([Range<usize>; N_KINDS], [u32; N_KINDS]), DbError> {
+    use DbErrorKind::*;
     let mut sections: [Range<usize>; N_KINDS] = Default::default();
     let mut present = [false; N_KINDS];
     let mut crcs = [0u32; N_KINDS];
@@ -506,20 +567,17 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
             return Err(DbError::new(Missing, k.name(), 0, 0));
         }
     }
-    let sec = |k: SectionKind| &bytes[sections[kind_index(k)].clone()];
-    let exact = |k: SectionKind, want: usize| {
-        let got = sec(k).len();
-        if got == want {
-            Ok(())
-        } else {
-            Err(DbError::new(Size, k.name(), want as u64, got as u64))
-        }
-    };
-    exact(SectionKind::Meta, core::mem::size_of::<MetaRecord>())?;
-    exact(SectionKind::Params, core::mem::size_of::<ParamsRecord>())?;
-    let meta = MetaRecord::read_from_bytes(sec(SectionKind::Meta))
+    Ok((sections, crcs))
+}
+
+/// Step 3: the meta and parameter records, and the values in them.
+fn parse_records(sec: &Sections<'_, '_>) -> Result<(MetaRecord, Params), DbError> {
+    use DbErrorKind::Size;
+    sec.exact(SectionKind::Meta, core::mem::size_of::<MetaRecord>())?;
+    sec.exact(SectionKind::Params, core::mem::size_of::<ParamsRecord>())?;
+    let meta = MetaRecord::read_from_bytes(sec.get(SectionKind::Meta))
         .map_err(|_| DbError::new(Size, "meta", 0, 0))?;
-    let pr = ParamsRecord::read_from_bytes(sec(SectionKind::Params))
+    let pr = ParamsRecord::read_from_bytes(sec.get(SectionKind::Params))
         .map_err(|_| DbError::new(Size, "params", 0, 0))?;
     let bad_param = |b: crate::BadParam| DbError::value(b.field, b.value);
     let params = Params::from_record(&pr).map_err(bad_param)?;
@@ -541,28 +599,40 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
     if let Some(v) = origin.iter().find(|v| !v.is_finite()) {
         return Err(DbError::value("origin", *v as f64));
     }
+    Ok((meta, params))
+}
+
+/// Step 4: the grid, distance map and per-site arrays are exactly as long
+/// as the meta record's counts and the parameters make them. Returns the
+/// site count (at least 1).
+fn check_array_sizes(
+    sec: &Sections<'_, '_>,
+    meta: &MetaRecord,
+    params: &Params,
+) -> Result<u64, DbError> {
+    let (w, h) = (meta.width.get() as u64, meta.height.get() as u64);
     // Sizes computed in u64/u128 so absurd dimensions cannot overflow; the
     // comparison with the real section length bounds everything.
-    let cells = (w as u64) * (h as u64);
-    exact(
+    let cells = w * h;
+    sec.exact(
         SectionKind::Grid,
         (cells.div_ceil(32) * 4).min(usize::MAX as u64) as usize,
     )?;
-    exact(SectionKind::Dist, cells.min(usize::MAX as u64) as usize)?;
+    sec.exact(SectionKind::Dist, cells.min(usize::MAX as u64) as usize)?;
     let n_sites = meta.site_count.get() as u64;
     if n_sites == 0 {
         return Err(DbError::value("site count", 0.0));
     }
     let sz = |n: u64, each: u64| (n as u128 * each as u128).min(usize::MAX as u128) as usize;
-    exact(
+    sec.exact(
         SectionKind::Sites,
         sz(n_sites, core::mem::size_of::<SiteRecord>() as u64),
     )?;
-    exact(
+    sec.exact(
         SectionKind::Scans,
         sz(n_sites, params.sensor.beams as u64 * 4),
     )?;
-    exact(
+    sec.exact(
         SectionKind::Hists,
         sz(n_sites, params.coarse.hist_cells() as u64 * 4),
     )?;
@@ -570,8 +640,16 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
         * params.coarse.win_headings as u64
         * params.coarse.win_cells() as u64
         * 4;
-    exact(SectionKind::Windows, sz(n_sites, per_site_windows))?;
-    let nb_len = sec(SectionKind::Neighbors).len();
+    sec.exact(SectionKind::Windows, sz(n_sites, per_site_windows))?;
+    Ok(n_sites)
+}
+
+/// Step 5: neighbour lists point at existing sites and lie inside the
+/// neighbour section; site positions are finite.
+fn check_sites(sec: &Sections<'_, '_>, n_sites: u64) -> Result<(), DbError> {
+    use DbErrorKind::*;
+    let nb_bytes = sec.get(SectionKind::Neighbors);
+    let nb_len = nb_bytes.len();
     if nb_len % 4 != 0 {
         return Err(DbError::new(
             Size,
@@ -580,15 +658,15 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
             nb_len as u64,
         ));
     }
-    let nb = <[u32]>::ref_from_bytes(sec(SectionKind::Neighbors))
-        .map_err(|_| DbError::misaligned_in_memory("neighbors", 4, sec(SectionKind::Neighbors)))?;
+    let nb = <[u32]>::ref_from_bytes(nb_bytes)
+        .map_err(|_| DbError::misaligned_in_memory("neighbors", 4, nb_bytes))?;
     if let Some(v) = nb.iter().find(|&&v| v as u64 >= n_sites) {
         return Err(DbError {
             expected: n_sites,
             ..DbError::value("neighbor index", *v as f64)
         });
     }
-    let sites = <[SiteRecord]>::ref_from_bytes(sec(SectionKind::Sites))
+    let sites = <[SiteRecord]>::ref_from_bytes(sec.get(SectionKind::Sites))
         .map_err(|_| DbError::new(Size, "sites", 0, 0))?;
     for s in sites {
         let (a, n) = (s.neighbor_start.get() as u64, s.neighbor_count.get() as u64);
@@ -605,8 +683,12 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
             return Err(DbError::value("site position", *v as f64));
         }
     }
-    // Arrays read in place must be aligned in memory too (the container may
-    // not start on an aligned address).
+    Ok(())
+}
+
+/// Step 6: arrays read in place must be aligned in memory too (the
+/// container may not start on an aligned address).
+fn check_memory_alignment(sec: &Sections<'_, '_>) -> Result<(), DbError> {
     for k in [
         SectionKind::Grid,
         SectionKind::Scans,
@@ -615,33 +697,34 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
         SectionKind::Windows,
         SectionKind::Index,
     ] {
-        let s = sec(k);
+        let s = sec.get(k);
         if <[u32]>::ref_from_bytes(s).is_err() {
             return Err(DbError::misaligned_in_memory(k.name(), 4, s));
         }
     }
-    crate::index::validate(sec(SectionKind::Index), &params, n_sites as usize)
-        .map_err(DbError::invalid)?;
-    let decision = match sec(SectionKind::Decision) {
-        [] => None,
-        d => {
-            exact(
-                SectionKind::Decision,
-                core::mem::size_of::<DecisionRecord>(),
-            )?;
-            let r = DecisionRecord::read_from_bytes(d)
-                .map_err(|_| DbError::new(Size, "decision", 0, 0))?;
-            let m = r.decision();
-            if !(0.0..=1.0).contains(&m.threshold) {
-                return Err(DbError::value("decision threshold", m.threshold as f64));
-            }
-            if !m.is_valid() {
-                return Err(DbError::invalid("decision model (a non-finite weight)"));
-            }
-            Some(m)
-        }
-    };
-    Ok((sections, crcs, meta, params, decision))
+    Ok(())
+}
+
+/// Step 8 (after the index, step 7): the optional decision model.
+fn parse_decision(sec: &Sections<'_, '_>) -> Result<Option<Decision>, DbError> {
+    let d = sec.get(SectionKind::Decision);
+    if d.is_empty() {
+        return Ok(None);
+    }
+    sec.exact(
+        SectionKind::Decision,
+        core::mem::size_of::<DecisionRecord>(),
+    )?;
+    let r = DecisionRecord::read_from_bytes(d)
+        .map_err(|_| DbError::new(DbErrorKind::Size, "decision", 0, 0))?;
+    let m = r.decision();
+    if !(0.0..=1.0).contains(&m.threshold) {
+        return Err(DbError::value("decision threshold", m.threshold as f64));
+    }
+    if !m.is_valid() {
+        return Err(DbError::invalid("decision model (a non-finite weight)"));
+    }
+    Ok(Some(m))
 }
 
 #[cfg(test)]

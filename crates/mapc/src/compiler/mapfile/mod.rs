@@ -777,6 +777,78 @@ fn as_number(y: &Yaml<'_>) -> Option<f64> {
     None
 }
 
+/// The YAML's `resolution`: a finite positive number of metres per cell.
+fn field_resolution(path: &Path, node: &Yaml) -> Result<f64, MapError> {
+    match as_number(node) {
+        Some(r) if r.is_finite() && r > 0.0 => Ok(r),
+        Some(r) => Err(MapError::BadResolution {
+            path: path.to_path_buf(),
+            value: r,
+        }),
+        None => Err(MapError::BadField {
+            path: path.to_path_buf(),
+            field: "resolution",
+            expected: "a number of metres per cell",
+            found: render(node),
+        }),
+    }
+}
+
+/// The YAML's `origin`: three finite numbers `[x m, y m, yaw rad]`.
+fn field_origin(path: &Path, node: &Yaml) -> Result<[f64; 3], MapError> {
+    let bad = |found: String| MapError::BadField {
+        path: path.to_path_buf(),
+        field: "origin",
+        expected: "three finite numbers [x m, y m, yaw rad]",
+        found,
+    };
+    let seq = match node.as_sequence() {
+        Some(seq) if seq.len() == 3 => seq,
+        _ => return Err(bad(render(node))),
+    };
+    let mut o = [0.0; 3];
+    for (slot, v) in o.iter_mut().zip(seq.iter()) {
+        match as_number(v) {
+            Some(x) if x.is_finite() => *slot = x,
+            _ => return Err(bad(format!("an item that is {}", render(v)))),
+        }
+    }
+    Ok(o)
+}
+
+/// The YAML's `negate`: 0, 1, true or false (also as a string).
+fn field_negate(path: &Path, v: &Yaml) -> Result<bool, MapError> {
+    if let Some(b) = v.as_bool() {
+        Ok(b)
+    } else if let Some(i) = v.as_integer() {
+        Ok(i != 0)
+    } else if let Some(i) = v.as_str().and_then(|s| s.trim().parse::<i64>().ok()) {
+        Ok(i != 0)
+    } else {
+        Err(MapError::BadField {
+            path: path.to_path_buf(),
+            field: "negate",
+            expected: "0, 1, true or false",
+            found: render(v),
+        })
+    }
+}
+
+/// The YAML's `mode`: trinary, scale or raw (any case).
+fn field_mode(path: &Path, v: &Yaml) -> Result<Mode, MapError> {
+    match v.as_str().map(|s| s.trim().to_ascii_lowercase()) {
+        Some(s) if s == "trinary" => Ok(Mode::Trinary),
+        Some(s) if s == "scale" => Ok(Mode::Scale),
+        Some(s) if s == "raw" => Ok(Mode::Raw),
+        _ => Err(MapError::BadField {
+            path: path.to_path_buf(),
+            field: "mode",
+            expected: "trinary, scale or raw",
+            found: render(v),
+        }),
+    }
+}
+
 fn parse_description(path: &Path, text: &str) -> Result<Description, MapError> {
     let p = || path.to_path_buf();
     let docs = Yaml::load_from_str(text).map_err(|e| MapError::YamlSyntax {
@@ -831,74 +903,9 @@ fn parse_description(path: &Path, text: &str) -> Result<Description, MapError> {
         }
     };
 
-    let res_node = required("resolution")?;
-    let resolution = match as_number(res_node) {
-        Some(r) if r.is_finite() && r > 0.0 => r,
-        Some(r) => {
-            return Err(MapError::BadResolution {
-                path: p(),
-                value: r,
-            })
-        }
-        None => {
-            return Err(MapError::BadField {
-                path: p(),
-                field: "resolution",
-                expected: "a number of metres per cell",
-                found: render(res_node),
-            })
-        }
-    };
-
-    let origin_node = required("origin")?;
-    let origin = match origin_node.as_sequence() {
-        Some(seq) if seq.len() == 3 => {
-            let mut o = [0.0; 3];
-            for (slot, v) in o.iter_mut().zip(seq.iter()) {
-                match as_number(v) {
-                    Some(x) if x.is_finite() => *slot = x,
-                    _ => {
-                        return Err(MapError::BadField {
-                            path: p(),
-                            field: "origin",
-                            expected: "three finite numbers [x m, y m, yaw rad]",
-                            found: format!("an item that is {}", render(v)),
-                        })
-                    }
-                }
-            }
-            o
-        }
-        _ => {
-            return Err(MapError::BadField {
-                path: p(),
-                field: "origin",
-                expected: "three finite numbers [x m, y m, yaw rad]",
-                found: render(origin_node),
-            })
-        }
-    };
-
-    let negate = match get("negate") {
-        None => false,
-        Some(v) => {
-            if let Some(b) = v.as_bool() {
-                b
-            } else if let Some(i) = v.as_integer() {
-                i != 0
-            } else if let Some(i) = v.as_str().and_then(|s| s.trim().parse::<i64>().ok()) {
-                i != 0
-            } else {
-                return Err(MapError::BadField {
-                    path: p(),
-                    field: "negate",
-                    expected: "0, 1, true or false",
-                    found: render(v),
-                });
-            }
-        }
-    };
-
+    let resolution = field_resolution(path, required("resolution")?)?;
+    let origin = field_origin(path, required("origin")?)?;
+    let negate = get("negate").map_or(Ok(false), |v| field_negate(path, v))?;
     let occupied_thresh = number("occupied_thresh", "a number in [0, 1]")?;
     let free_thresh = number("free_thresh", "a number in [0, 1]")?;
     if !((0.0..=1.0).contains(&occupied_thresh)
@@ -912,22 +919,7 @@ fn parse_description(path: &Path, text: &str) -> Result<Description, MapError> {
         });
     }
 
-    let mode = match get("mode") {
-        None => Mode::Trinary,
-        Some(v) => match v.as_str().map(|s| s.trim().to_ascii_lowercase()) {
-            Some(s) if s == "trinary" => Mode::Trinary,
-            Some(s) if s == "scale" => Mode::Scale,
-            Some(s) if s == "raw" => Mode::Raw,
-            _ => {
-                return Err(MapError::BadField {
-                    path: p(),
-                    field: "mode",
-                    expected: "trinary, scale or raw",
-                    found: render(v),
-                })
-            }
-        },
-    };
+    let mode = get("mode").map_or(Ok(Mode::Trinary), |v| field_mode(path, v))?;
 
     Ok(Description {
         image,
