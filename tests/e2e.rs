@@ -147,6 +147,82 @@ fn diff_reports_changes() {
     assert!(!j["sites"]["added"].as_array().unwrap().is_empty());
 }
 
+/// Two databases with the same sites and parameters whose scans differ
+/// (one value of one reference scan changed; its CRC left stale, so the
+/// copy is read with `--no-verify`) are not "the same": `diff` compares
+/// section contents and names the site.
+#[test]
+fn diff_compares_section_contents() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = built(dir.path(), &[]);
+    let bytes = std::fs::read(&a).unwrap();
+    let (offset, site) = {
+        let db = refloc::RefDb::new(bytes.as_slice()).unwrap();
+        let scans = db.section(refloc::format::SectionKind::Scans);
+        let base = scans.as_ptr() as usize - bytes.as_ptr() as usize;
+        // Site 1's first beam: a different range, same everything else.
+        let site = 1;
+        (base + site * db.params().sensor.beams as usize * 4, site)
+    };
+    let mut changed = bytes.clone();
+    let v = f32::from_le_bytes(changed[offset..offset + 4].try_into().unwrap());
+    changed[offset..offset + 4].copy_from_slice(&(v + 0.5).to_le_bytes());
+    let b = dir.path().join("b.refdb");
+    std::fs::write(&b, &changed).unwrap();
+    let args = |json: bool| {
+        let mut v = vec![
+            "--no-verify",
+            "diff",
+            a.to_str().unwrap(),
+            b.to_str().unwrap(),
+        ];
+        if json {
+            v.push("--json");
+        }
+        v.iter().map(|s| s.to_string()).collect::<Vec<_>>()
+    };
+    let run = |json: bool| {
+        let owned = args(json);
+        let refs: Vec<&str> = owned.iter().map(String::as_str).collect();
+        mapc(&refs, dir.path())
+    };
+    let o = run(true);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["same"], false);
+    let scans = j["sections"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["kind"] == "scans")
+        .unwrap();
+    assert_eq!(scans["same"], false);
+    assert!(j["changes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|c| c["what"] == "section.scans"));
+    let other = j["sites"]["other_data"].as_array().unwrap();
+    assert_eq!(other.len(), 1, "{other:?}");
+    assert_eq!(other[0]["old"], site);
+    assert_eq!(other[0]["what"][0], "scan");
+    assert!(j["sites"]["moved"].as_array().unwrap().is_empty());
+    let o = run(false);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(text(&o).contains("changed section.scans"), "{}", text(&o));
+    assert!(
+        text(&o).contains("1 with other scan or histograms"),
+        "{}",
+        text(&o)
+    );
+    // A database against itself is the same.
+    let o = mapc(
+        &["diff", a.to_str().unwrap(), a.to_str().unwrap()],
+        dir.path(),
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+}
+
 #[test]
 fn localize_a_batch_of_json_lines() {
     let dir = tempfile::tempdir().unwrap();

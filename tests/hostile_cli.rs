@@ -260,6 +260,58 @@ fn eval_check_refuses_an_endless_baseline_before_evaluating() {
     assert!(!out.path().join("report.json").exists());
 }
 
+/// Counts that size work or memory are bounded: each past its bound is a
+/// usage error (exit 2) naming the option and the bound, before any work.
+#[test]
+fn counts_past_their_bounds_are_refused() {
+    let (db, _) = fixture();
+    let db = db.to_str().unwrap();
+    let map = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../maps/office-demo/office-demo.yaml");
+    let map = map.to_str().unwrap();
+    let cases: [(&[&str], &str); 7] = [
+        (
+            &["eval", db, "--beams", "100000000"],
+            "--beams must be between 3 and 100000, not 100000000",
+        ),
+        (
+            &["eval", db, "--beams", "2"],
+            "--beams must be between 3 and 100000, not 2",
+        ),
+        (
+            &["eval", db, "--poses", "0"],
+            "--poses must be between 1 and 1000000, not 0",
+        ),
+        (
+            &["eval", db, "--e1-trials", "99999999999"],
+            "--e1-trials must be between 1 and 1000000",
+        ),
+        (
+            &["eval", db, "--outliers", "400"],
+            "--outliers must be between 0 and 362, not 400",
+        ),
+        (
+            &[
+                "build",
+                map,
+                "-o",
+                "/nonexistent/x.refdb",
+                "--fit-queries",
+                "1000000000",
+            ],
+            "must be between 0 and 100000, not 1000000000",
+        ),
+        (
+            &["demo", "--poses", "0"],
+            "must be between 1 and 1000000, not 0",
+        ),
+    ];
+    for (args, says) in cases {
+        let o = mapc().args(args).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", text(&o));
+        assert!(text(&o).contains(says), "{args:?}: {}", text(&o));
+    }
+}
+
 #[test]
 fn thread_counts_out_of_range_are_refused() {
     for n in ["0", "100000"] {

@@ -451,6 +451,7 @@ fn build_degenerate(what: &str, src: &MapSource) -> Result<usize, String> {
     let out = match out {
         Ok(o) => o,
         Err(e) => {
+            let e = e.to_string();
             assert!(!e.trim().is_empty(), "{what}: empty error");
             return Err(e);
         }

@@ -155,7 +155,7 @@ impl Database {
                 )
             }
         };
-        let out = pipeline::build(&src, &BuildConfig::default())?;
+        let out = pipeline::build(&src, &BuildConfig::default()).map_err(|e| e.to_string())?;
         let mut bytes = Vec::new();
         let refs: Vec<_> = out
             .sections

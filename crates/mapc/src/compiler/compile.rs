@@ -11,6 +11,7 @@ use refloc::{pgr, prep, MapFrame, Pose2};
 use zerocopy::little_endian::{F32, U32, U64};
 use zerocopy::IntoBytes;
 
+use crate::compiler::error::BuildError;
 use crate::compiler::fit::{self, FitReport};
 use crate::compiler::sim::{self, Lidar};
 
@@ -282,7 +283,7 @@ fn per_scan_bytes(
 }
 
 /// Compiles everything but the manifest, which the caller appends.
-pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, String> {
+pub fn compile(input: &CompileInput<'_>, sites: &[SiteIn]) -> Result<Compiled, BuildError> {
     compile_with(input, sites, &mut |_| {})
 }
 
@@ -292,18 +293,17 @@ pub fn compile_with(
     input: &CompileInput<'_>,
     sites: &[SiteIn],
     lap: &mut dyn FnMut(&'static str),
-) -> Result<Compiled, String> {
+) -> Result<Compiled, BuildError> {
     let mut params = input.params;
-    params
-        .validate()
-        .map_err(|f| format!("invalid parameter: {f}"))?;
+    params.validate().map_err(BuildError::Param)?;
     if sites.is_empty() {
-        return Err(
-            "no reference sites: the map has no free space wide enough for the robot".into(),
-        );
+        return Err(BuildError::NoSites);
     }
-    let grid = BitGrid::new(input.width, input.height, input.blocked)
-        .ok_or("grid bits shorter than the grid")?;
+    let grid =
+        BitGrid::new(input.width, input.height, input.blocked).ok_or(BuildError::GridBits {
+            width: input.width,
+            height: input.height,
+        })?;
     let frame = input.frame;
     // The distance map first, before any per-site data exists: its distance
     // transform needs 12 bytes per cell while it runs (peak memory).
@@ -354,9 +354,7 @@ pub fn compile_with(
     };
     params.ssm.w = fit.w;
     lap("compile.fit");
-    params
-        .validate()
-        .map_err(|f| format!("invalid fitted parameter: {f}"))?;
+    params.validate().map_err(BuildError::FittedParam)?;
     let hist_bytes = per_scan_bytes(&scans, params.coarse.hist_cells(), |s| {
         scan_histogram(s, &params)
     });

@@ -62,29 +62,48 @@ impl Default for IndexOptions {
     }
 }
 
+/// Why index options or inputs were refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum IndexError {
+    /// `branching` outside 2..=`INDEX_CHILDREN_MAX`.
+    #[error("index branching must be 2..={max}, got {0}", max = INDEX_CHILDREN_MAX)]
+    Branching(usize),
+    /// `leaf_size` of 0.
+    #[error("index leaf size must be at least 1")]
+    LeafSize,
+    /// `beam` outside 1..=`INDEX_BEAM_MAX`.
+    #[error("index beam must be 1..={max}, got {0}", max = INDEX_BEAM_MAX)]
+    Beam(u32),
+    /// `leaves` outside 1..=`INDEX_LEAVES_MAX`.
+    #[error("index leaves must be 1..={max}, got {0}", max = INDEX_LEAVES_MAX)]
+    Leaves(u32),
+    /// The histogram sections' lengths (bytes) do not match the site count.
+    #[error("index: histogram sections ({hists} and {windows} bytes) do not match {sites} sites")]
+    Sections {
+        /// Full-view histogram section (bytes).
+        hists: usize,
+        /// Window histogram section (bytes).
+        windows: usize,
+        /// Sites.
+        sites: usize,
+    },
+}
+
 impl IndexOptions {
     /// Checks the ranges the runtime accepts.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), IndexError> {
         if !(2..=INDEX_CHILDREN_MAX).contains(&self.branching) {
-            return Err(format!(
-                "index branching must be 2..={INDEX_CHILDREN_MAX}, got {}",
-                self.branching
-            ));
+            return Err(IndexError::Branching(self.branching));
         }
         if self.leaf_size == 0 {
-            return Err("index leaf size must be at least 1".into());
+            return Err(IndexError::LeafSize);
         }
         if !(1..=INDEX_BEAM_MAX as u32).contains(&self.beam) {
-            return Err(format!(
-                "index beam must be 1..={INDEX_BEAM_MAX}, got {}",
-                self.beam
-            ));
+            return Err(IndexError::Beam(self.beam));
         }
         if !(1..=INDEX_LEAVES_MAX as u32).contains(&self.leaves) {
-            return Err(format!(
-                "index leaves must be 1..={INDEX_LEAVES_MAX}, got {}",
-                self.leaves
-            ));
+            return Err(IndexError::Leaves(self.leaves));
         }
         Ok(())
     }
@@ -332,7 +351,7 @@ pub fn build(
     params: &Params,
     sites: usize,
     opts: &IndexOptions,
-) -> Result<Option<Vec<u8>>, String> {
+) -> Result<Option<Vec<u8>>, IndexError> {
     opts.validate()?;
     if sites < opts.min_sites || sites == 0 {
         return Ok(None);
@@ -344,7 +363,11 @@ pub fn build(
     );
     let full = params.coarse.hist_cells();
     if hists.len() != sites * full * 4 || windows.len() != sites * nw * nh * wc * 4 {
-        return Err("index: histogram sections do not match the site count".into());
+        return Err(IndexError::Sections {
+            hists: hists.len(),
+            windows: windows.len(),
+            sites,
+        });
     }
     let mut views: Vec<(u32, Vectors<'_>)> = vec![(
         0,

@@ -3,6 +3,7 @@
 
 pub mod compile;
 pub mod edt;
+pub mod error;
 pub mod fit;
 pub mod gvd;
 pub mod index;

@@ -15,6 +15,7 @@ use sha2::Digest;
 
 use crate::compiler::compile::{self, CompileInput, Compiled, SiteIn};
 use crate::compiler::edt::DistanceField;
+use crate::compiler::error::BuildError;
 use crate::compiler::fit::FitReport;
 use crate::compiler::gvd::{self, GvdGraph, GvdOptions};
 use crate::compiler::mapfile::MapSource;
@@ -142,7 +143,7 @@ impl Default for BuildConfig {
 impl BuildConfig {
     /// Runtime parameters for this configuration (before the fit): the
     /// defaults for the sensor, with each group's options set.
-    pub fn params(&self) -> Result<Params, String> {
+    pub fn params(&self) -> Result<Params, BuildError> {
         let d = Params::defaults(self.beams, self.range_max);
         let [x, y, theta] = self.sensor_offset;
         let p = Params {
@@ -184,15 +185,17 @@ impl BuildConfig {
                 ambiguity_ratio: self.ambiguity_ratio,
             },
         };
-        p.validate().map_err(|f| format!("invalid option: {f}"))?;
+        p.validate().map_err(BuildError::Option)?;
         Ok(p)
     }
 
     /// The stored window widths (rad; 0 for an unused slot) from
     /// `fov_windows_deg` (degrees, at most two).
-    fn win_widths(&self) -> Result<[f32; 2], String> {
+    fn win_widths(&self) -> Result<[f32; 2], BuildError> {
         if self.fov_windows_deg.len() > 2 {
-            return Err("at most two --fov-windows widths".into());
+            return Err(BuildError::TooManyWindows {
+                given: self.fov_windows_deg.len(),
+            });
         }
         let mut widths = [0.0; 2];
         for (slot, w) in widths.iter_mut().zip(&self.fov_windows_deg) {
@@ -329,29 +332,26 @@ fn check_db_size(
     params: &Params,
     sites: &[sites::SitePlacement],
     max_db_bytes: u64,
-) -> Result<(), String> {
+) -> Result<(), BuildError> {
     let grid = &src.grid;
     let links = sites.iter().map(|s| s.neighbours.len() as u64).sum();
     let size = compile::db_size(params, grid.width, grid.height, sites.len(), links);
     if size.total <= max_db_bytes {
         return Ok(());
     }
-    Err(format!(
-        "the database would take at least {} bytes: {} reference sites of {} bytes each \
-         (for {} free cells at {} m per cell) plus the grid and distance map; the limit is {} \
-         bytes (--max-db-bytes raises it)",
-        size.total,
-        size.sites,
-        size.per_site,
-        grid.free_count(),
-        grid.resolution,
-        max_db_bytes
-    ))
+    Err(BuildError::TooLarge {
+        total: size.total,
+        sites: size.sites,
+        per_site: size.per_site,
+        free_cells: grid.free_count(),
+        resolution: grid.resolution,
+        limit: max_db_bytes,
+    })
 }
 
 /// Builds the database sections of `src` with `cfg`. Deterministic: the
 /// same inputs and options give identical bytes whatever the thread count.
-pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> {
+pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, BuildError> {
     let params = cfg.params()?;
     let grid = &src.grid;
     let mut times = StageTimes::default();
@@ -378,8 +378,12 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> 
         ..SiteOptions::default()
     };
     let blocked = grid.blocked_bits(cfg.unknown_blocks);
-    let bitgrid =
-        refloc::raycast::BitGrid::new(grid.width, grid.height, &blocked).ok_or("grid too large")?;
+    let bitgrid = refloc::raycast::BitGrid::new(grid.width, grid.height, &blocked).ok_or(
+        BuildError::GridTooLarge {
+            width: grid.width,
+            height: grid.height,
+        },
+    )?;
     let placed = sites::place_sites(grid, &df, &graph, &sopts);
     laps.lap("sites.place");
     check_db_size(src, &params, &placed, cfg.max_db_bytes)?;
@@ -441,10 +445,7 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> 
         ..refloc::Decision::DEFAULT
     };
     if !decision.is_valid() {
-        return Err(format!(
-            "--accept-confidence must be within 0..=1, got {}",
-            cfg.accept_confidence
-        ));
+        return Err(BuildError::AcceptConfidence(cfg.accept_confidence));
     }
     sections.push((
         SectionKind::Decision,
@@ -469,10 +470,7 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, String> 
         "sites": placed.len(),
         "coverage": coverage.fraction,
     });
-    sections.push((
-        SectionKind::Manifest,
-        serde_json::to_vec_pretty(&manifest).map_err(|e| e.to_string())?,
-    ));
+    sections.push((SectionKind::Manifest, serde_json::to_vec_pretty(&manifest)?));
     laps.lap("manifest");
     times.steps = laps.into_steps();
     Ok(BuildOutput {

@@ -83,8 +83,8 @@ pub struct BuildOpts {
     /// Largest spacing between reference sites along a GVD edge (m).
     #[arg(long, value_name = "M")]
     pub site_spacing: Option<f64>,
-    /// Simulated queries used to fit the logistic weights (0: built-in weights).
-    #[arg(long, default_value_t = 150)]
+    /// Simulated queries used to fit the logistic weights (0: built-in weights; at most 100000).
+    #[arg(long, default_value_t = 150, value_parser = crate::util::count::<0, 100_000>)]
     pub fit_queries: usize,
     /// Seed of every random choice in the build.
     #[arg(long, default_value_t = 1)]

@@ -24,8 +24,8 @@ pub struct Args {
     /// Output directory.
     #[arg(long, default_value = "build-artifacts/demo", value_name = "DIR")]
     pub out: PathBuf,
-    /// Simulated scans per experiment.
-    #[arg(long, default_value_t = 200)]
+    /// Simulated scans per experiment (1 to 1000000).
+    #[arg(long, default_value_t = 200, value_parser = crate::util::count::<1, 1_000_000>)]
     pub poses: usize,
     /// Seed.
     #[arg(long, default_value_t = 1)]

@@ -262,13 +262,46 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The largest `--beams` (the runtime is tested with 100,000-beam scans).
+const MAX_BEAMS: usize = 100_000;
+/// The largest `--poses`, `--e1-trials` and `--e2-trials`: each trial keeps
+/// a record of a few hundred bytes, so this bounds the report's memory.
+const MAX_TRIALS: usize = 1_000_000;
+
+/// Refuses counts that are empty or past the bounds above, naming the option.
+fn check_counts(a: &Args) -> Result<(), crate::util::CliError> {
+    let checks = [
+        ("--beams", a.beams, 3, MAX_BEAMS),
+        ("--poses", a.poses, 1, MAX_TRIALS),
+        ("--e1-trials", a.e1_trials, 1, MAX_TRIALS),
+        ("--e2-trials", a.e2_trials, 1, MAX_TRIALS),
+        ("--outliers", a.outliers, 0, a.beams),
+    ];
+    for (option, value, lo, hi) in checks {
+        if !(lo..=hi).contains(&value) {
+            return Err(input_err(anyhow::anyhow!(
+                "{option} must be between {lo} and {hi}, not {value}"
+            )));
+        }
+    }
+    if !(a.range_max.is_finite() && a.range_max > 0.0) {
+        return Err(input_err(anyhow::anyhow!(
+            "--range-max must be a positive number of metres, not {}",
+            a.range_max
+        )));
+    }
+    Ok(())
+}
+
 /// Runs the requested experiments and returns the report.
 pub fn evaluate(a: &Args, ui: &Ui) -> Result<Value, crate::util::CliError> {
+    check_counts(a)?;
     let db = open_db(&a.db, Check::Full)?;
     let fov = a.fov.to_radians();
-    if !(fov > 0.0 && fov <= 2.0 * std::f32::consts::PI + 1e-3) || a.beams < 3 {
+    if !(fov > 0.0 && fov <= 2.0 * std::f32::consts::PI + 1e-3) {
         return Err(input_err(anyhow::anyhow!(
-            "--fov must be in (0, 360] degrees and --beams at least 3"
+            "--fov must be in (0, 360] degrees, not {}",
+            a.fov
         )));
     }
     let ev = Evaluation { a, ui, db, fov };

@@ -196,6 +196,64 @@ pub fn verify(a: VerifyArgs) -> CliResult {
     Ok(ExitCode::SUCCESS)
 }
 
+/// One entry per section kind (bytes old and new, CRC-32C old and new,
+/// same or not); a `section.<kind>` change for each that differs. The
+/// manifest is compared through its fields (inputs, options) instead.
+fn section_changes<D: AsRef<[u8]>>(
+    da: &RefDb<D>,
+    db: &RefDb<D>,
+    changes: &mut Vec<Value>,
+) -> Vec<Value> {
+    let mut out = Vec::new();
+    for &k in SectionKind::ALL.iter() {
+        let (x, y) = (da.section(k), db.section(k));
+        let same = x == y;
+        let crc = |d: &RefDb<D>| format!("{:08x}", d.section_crc(k));
+        out.push(
+            json!({"kind": k.name(), "same": same, "old_bytes": x.len(), "new_bytes": y.len(),
+            "old_crc32c": crc(da), "new_crc32c": crc(db)}),
+        );
+        if !same && k != SectionKind::Manifest {
+            changes.push(json!({"what": format!("section.{}", k.name()),
+                "old": format!("{} bytes, crc32c {}", x.len(), crc(da)),
+                "new": format!("{} bytes, crc32c {}", y.len(), crc(db))}));
+        }
+    }
+    out
+}
+
+/// What differs between site `j` of `da` and site `i` of `db` besides its
+/// position: its reference scan, its full-view histogram, its window
+/// histograms (compared bit for bit where the layouts agree).
+fn site_data_changes<D: AsRef<[u8]>>(
+    da: &RefDb<D>,
+    j: usize,
+    db: &RefDb<D>,
+    i: usize,
+) -> Vec<&'static str> {
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
+    let mut what = Vec::new();
+    if bits(da.scan(j)) != bits(db.scan(i)) {
+        what.push("scan");
+    }
+    if bits(da.hist(j)) != bits(db.hist(i)) {
+        what.push("histogram");
+    }
+    let (pa, pb) = (&da.params().coarse, &db.params().coarse);
+    let layout = |p: &refloc::params::CoarseParams| (p.win_count(), p.win_headings);
+    if layout(pa) != layout(pb) {
+        return what;
+    }
+    let (nw, nh) = layout(pa);
+    let windows_differ = (0..nw)
+        .flat_map(|w| (0..nh as usize).map(move |h| (w, h)))
+        .any(|(w, h)| bits(da.window_hist(j, w, h)) != bits(db.window_hist(i, w, h)));
+    if windows_differ {
+        what.push("window histograms");
+    }
+    what
+}
+
 pub fn diff(a: DiffArgs) -> CliResult {
     let da = open_db(&a.a, Check::Full)?;
     let db = open_db(&a.b, Check::Full)?;
@@ -219,6 +277,9 @@ pub fn diff(a: DiffArgs) -> CliResult {
             changes.push(json!({"what": format!("input.{k}"), "old": va, "new": vb}));
         }
     }
+    // Section contents, byte for byte: a grid, scan or histogram that
+    // differs is a change even where the sites and parameters agree.
+    let sections = section_changes(&da, &db, &mut changes);
     // Sites: one-to-one greedy matching by distance (closest pairs first).
     let sa: Vec<[f32; 2]> = (0..da.site_count()).map(|i| da.site_xy(i)).collect();
     let sb: Vec<[f32; 2]> = (0..db.site_count()).map(|i| db.site_xy(i)).collect();
@@ -234,6 +295,7 @@ pub fn diff(a: DiffArgs) -> CliResult {
     pairs.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)).then(x.2.cmp(&y.2)));
     let (mut used_a, mut used_b) = (vec![false; sa.len()], vec![false; sb.len()]);
     let mut moved = Vec::new();
+    let mut rescanned = Vec::new();
     for (d, j, i) in pairs {
         if used_a[j] || used_b[i] {
             continue;
@@ -242,6 +304,10 @@ pub fn diff(a: DiffArgs) -> CliResult {
         used_b[i] = true;
         if d > a.same {
             moved.push(json!({"old": j, "new": i, "from": sa[j], "to": sb[i], "distance_m": d}));
+        }
+        let what = site_data_changes(&da, j, &db, i);
+        if !what.is_empty() {
+            rescanned.push(json!({"old": j, "new": i, "at": sb[i], "what": what}));
         }
     }
     let added: Vec<Value> = (0..sb.len())
@@ -256,9 +322,12 @@ pub fn diff(a: DiffArgs) -> CliResult {
         && added.is_empty()
         && moved.is_empty()
         && removed.is_empty()
+        && rescanned.is_empty()
         && sa.len() == sb.len();
     let report = json!({"identical_bytes": da.bytes() == db.bytes(), "same": same, "changes": changes,
-        "sites": {"old": sa.len(), "new": sb.len(), "added": added, "removed": removed, "moved": moved}});
+        "sections": sections,
+        "sites": {"old": sa.len(), "new": sb.len(), "added": added, "removed": removed, "moved": moved,
+            "other_data": rescanned}});
     if a.json {
         outln!(
             "{}",
@@ -278,12 +347,13 @@ pub fn diff(a: DiffArgs) -> CliResult {
             );
         }
         outln!(
-            "  sites: {} -> {} ({} added, {} removed, {} moved)",
+            "  sites: {} -> {} ({} added, {} removed, {} moved, {} with other scan or histograms)",
             sa.len(),
             sb.len(),
             added.len(),
             removed.len(),
-            moved.len()
+            moved.len(),
+            rescanned.len()
         );
         for m in &moved {
             outln!(

@@ -200,6 +200,20 @@ pub fn open_db(path: &Path, check: Check) -> Result<refloc::RefDb<DbBytes>, CliE
     Ok(db)
 }
 
+/// A clap value parser for a count within `LO..=HI`: a count past the bound
+/// is a usage error (exit 2) that names the bound.
+pub fn count<const LO: usize, const HI: usize>(s: &str) -> Result<usize, String> {
+    let n: usize = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("not a whole number: {s:?}"))?;
+    if (LO..=HI).contains(&n) {
+        Ok(n)
+    } else {
+        Err(format!("must be between {LO} and {HI}, not {n}"))
+    }
+}
+
 /// Parses "x,y,yaw" (metres, metres, radians).
 pub fn parse_triple(s: &str) -> Result<[f64; 3], String> {
     let v: Result<Vec<f64>, _> = s.split(',').map(|t| t.trim().parse::<f64>()).collect();

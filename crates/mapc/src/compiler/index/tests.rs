@@ -60,6 +60,7 @@ fn sections_that_disagree_with_the_site_count_are_an_error() {
     };
     assert!(build(&h, &w, &params(), 20, &bad)
         .unwrap_err()
+        .to_string()
         .contains("beam"));
 }
 
