@@ -1,4 +1,5 @@
-//! An RGB pixel buffer with anti-aliased drawing primitives and clipping;
+//! An RGB pixel buffer with anti-aliased drawing primitives clipped to the
+//! image;
 //! text (see `text.rs`) and charts are drawn into it through `plotters`. Coordinates are pixels as `f64`, x right, y down;
 //! pixel `(i, j)` covers `[i, i+1) x [j, j+1)`, so its centre is
 //! `(i + 0.5, j + 0.5)`.
@@ -23,7 +24,7 @@ pub enum Align {
     End,
 }
 
-/// Half-open clip rectangle in integer pixels.
+/// Half-open rectangle in integer pixels that drawing is clipped to (the image).
 #[derive(Debug, Clone, Copy)]
 struct Clip {
     x0: i64,
@@ -33,7 +34,7 @@ struct Clip {
 }
 
 /// An RGB image with drawing operations. All operations clip to the image
-/// (and to the optional clip rectangle) and silently ignore non-finite input.
+/// and silently ignore non-finite input.
 #[derive(Debug, Clone)]
 pub struct Raster {
     width: u32,
@@ -98,27 +99,7 @@ impl Raster {
         Some([self.buf[i], self.buf[i + 1], self.buf[i + 2]])
     }
 
-    /// Restrict drawing to the half-open pixel rectangle `[x0, x1) x [y0, y1)`
-    /// (intersected with the image); `None` removes the restriction.
-    pub fn set_clip(&mut self, rect: Option<(i64, i64, i64, i64)>) {
-        let (w, h) = (self.width as i64, self.height as i64);
-        self.clip = match rect {
-            None => Clip {
-                x0: 0,
-                y0: 0,
-                x1: w,
-                y1: h,
-            },
-            Some((x0, y0, x1, y1)) => Clip {
-                x0: x0.clamp(0, w),
-                y0: y0.clamp(0, h),
-                x1: x1.clamp(0, w),
-                y1: y1.clamp(0, h),
-            },
-        };
-    }
-
-    /// Set pixel `(x, y)` to `c` (ignored outside the clip rectangle).
+    /// Set pixel `(x, y)` to `c` (ignored outside the image).
     pub fn put(&mut self, x: i64, y: i64, c: Rgb) {
         self.blend(x, y, c, 1.0);
     }

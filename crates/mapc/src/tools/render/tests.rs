@@ -16,6 +16,17 @@ fn temp_png(name: &str) -> std::path::PathBuf {
     ))
 }
 
+/// A `w` x `h` map of 5 cm cells at the origin.
+fn blank_layer(gray: &[u8], w: u32, h: u32) -> MapLayer<'_> {
+    MapLayer {
+        width: w,
+        height: h,
+        gray,
+        resolution: 0.05,
+        origin: [0.0; 3],
+    }
+}
+
 fn count_color(r: &Raster, c: Rgb) -> usize {
     r.as_bytes().chunks_exact(3).filter(|p| *p == c).count()
 }
@@ -171,13 +182,7 @@ fn text_renders_glyph_pixels_inside_its_box() {
 #[test]
 fn text_and_canvas_drawing_is_deterministic() {
     let gray = white_map(120, 80);
-    let map = MapLayer {
-        width: 120,
-        height: 80,
-        gray: &gray,
-        resolution: 0.05,
-        origin: [0.0; 3],
-    };
+    let map = blank_layer(&gray, 120, 80);
     let draw = || {
         let mut c = MapCanvas::with_long_side(&map, 600);
         c.title("a title: θ and 12 sites");
