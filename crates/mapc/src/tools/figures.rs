@@ -105,7 +105,8 @@ pub fn error_figure(trials: &[Trial], title: &str, path: &Path) -> io::Result<()
         .min(300.0);
     let mut c = Chart::new(title)
         .x_label("|error| (mm; heading: deg x 10)")
-        .y_label("trials");
+        .y_label("trials")
+        .integer_y();
     let (e1, c1) = plot::histogram(&ex, 30, Some((0.0, hi)));
     let (_, c2) = plot::histogram(&ey, 30, Some((0.0, hi)));
     let (_, c3) = plot::histogram(
@@ -145,7 +146,9 @@ pub fn rank_figure(trials: &[Trial], title: &str, path: &Path) -> io::Result<()>
     let (edges, counts) = plot::histogram(&ranks, top as usize, Some((0.5, top + 0.5)));
     let mut c = Chart::new(title)
         .x_label("coarse rank of the correct site (1 = best)")
-        .y_label("queries");
+        .y_label("queries")
+        .integer_x()
+        .integer_y();
     c.hist(&edges, &counts, color::BLUE, "");
     c.save_png(path)
 }

@@ -1,10 +1,12 @@
 //! Map figures: an occupancy map drawn as a PNG with overlays placed in
-//! map-frame coordinates (metres), using a built-in bitmap font for labels.
+//! map-frame coordinates (metres), with text in the bundled DejaVu Sans font
+//! (drawn through `plotters`, see [`text`]).
 //!
 //! The module is self-contained (no other `mapc` module is needed): the map
 //! comes in as a plain [`MapLayer`] and everything else as numbers. The
-//! lower-level [`Raster`] (pixel buffer with anti-aliased primitives and text)
-//! is public as well and is shared with [`crate::tools::plot`].
+//! map image itself is a hand-written per-cell raster with anti-aliased
+//! overlay primitives ([`Raster`], public as well); the charts of
+//! [`crate::tools::plot`] draw into the same kind of image with `plotters`.
 //!
 //! ```no_run
 //! use mapc::tools::render::{color, MapCanvas, MapLayer, Mark, Corner};
@@ -18,8 +20,8 @@
 //! ```
 
 pub mod color;
-mod font;
 mod raster;
+pub mod text;
 
 #[cfg(test)]
 mod tests;
@@ -27,8 +29,8 @@ mod tests;
 use std::io;
 use std::path::Path;
 
-pub use font::text_size;
 pub use raster::{Align, Raster, Rgb};
+pub use text::text_size;
 
 /// Default length in pixels of the longer side of a [`MapCanvas`].
 pub const DEFAULT_LONG_SIDE: u32 = 1600;
@@ -96,7 +98,7 @@ pub struct MapCanvas {
     cos_yaw: f64,
     sin_yaw: f64,
     yaw: f64,
-    text_scale: u32,
+    font_px: f64,
     unit: f64,
     /// Pixel box `(x0, x1, bottom)` of the title, which top-corner boxes avoid.
     title_box: Option<(f64, f64, f64)>,
@@ -193,7 +195,7 @@ impl MapCanvas {
             cos_yaw: yaw.cos(),
             sin_yaw: yaw.sin(),
             yaw,
-            text_scale: ((long / 600.0).ceil() as u32).clamp(1, 8),
+            font_px: (long / 60.0).clamp(10.0, 300.0),
             unit: (long / 900.0).max(1.0),
             title_box: None,
         }
@@ -219,15 +221,17 @@ impl MapCanvas {
         self.raster.height()
     }
 
-    /// Font scale used by [`MapCanvas::label`], legends and the scale bar
-    /// (each font pixel is `text_scale` x `text_scale` output pixels).
-    pub fn text_scale(&self) -> u32 {
-        self.text_scale
+    /// Font size in pixels of legends and the scale bar (labels are a
+    /// little smaller, the title larger): about 1/60 of the longer side.
+    pub fn font_px(&self) -> f64 {
+        self.font_px
     }
 
-    /// Change the default font scale (minimum 1).
-    pub fn set_text_scale(&mut self, scale: u32) {
-        self.text_scale = scale.max(1);
+    /// Change the font size (pixels, at least 4).
+    pub fn set_font_px(&mut self, px: f64) {
+        if px.is_finite() {
+            self.font_px = px.max(4.0);
+        }
     }
 
     /// Default stroke unit in pixels (about 1 px per 900 px of image side),
@@ -400,39 +404,20 @@ impl MapCanvas {
     }
 
     /// Text label next to map-frame point `(x, y)` (to its upper right), at
-    /// the canvas text scale, with a white halo.
+    /// 0.8 times the canvas font size, with a white halo.
     pub fn label(&mut self, x: f64, y: f64, text: &str, c: Rgb) {
-        let s = self.text_scale;
-        self.label_scaled(x, y, text, c, s);
-    }
-
-    /// Like [`MapCanvas::label`] with an explicit font scale.
-    pub fn label_scaled(&mut self, x: f64, y: f64, text: &str, c: Rgb, scale: u32) {
         let (px, py) = self.world_to_px(x, y);
-        let off = 2.0 * scale.max(1) as f64;
+        let fs = 0.8 * self.font_px;
+        let off = 0.15 * fs;
         self.raster.text_halo(
             px + off,
             py - off,
             text,
-            scale,
+            fs,
             c,
             color::WHITE,
             Align::Start,
             Align::End,
-        );
-    }
-
-    /// Text with its top-left corner at pixel `(px, py)`, with a white halo.
-    pub fn text_px(&mut self, px: f64, py: f64, text: &str, c: Rgb, scale: u32) {
-        self.raster.text_halo(
-            px,
-            py,
-            text,
-            scale,
-            c,
-            color::WHITE,
-            Align::Start,
-            Align::Start,
         );
     }
 
@@ -462,22 +447,24 @@ impl MapCanvas {
         if entries.is_empty() {
             return;
         }
-        let s = self.text_scale;
-        let (w, h) = legend_size(entries, s);
+        let fs = self.font_px;
+        let (w, h) = legend_size(entries, fs);
         let (x, y) = self.corner_origin(corner, w as f64, h as f64);
-        draw_legend(&mut self.raster, x, y, entries, s);
+        draw_legend(&mut self.raster, x, y, entries, fs);
     }
 
-    /// Title text centred at the top of the image in a white box, one font
-    /// scale larger than the canvas text scale (smaller if it would not fit).
-    /// Legends and scale bars drawn afterwards in a top corner avoid it.
+    /// Title text centred at the top of the image in a white box, 1.3 times
+    /// the canvas font size (smaller if it would not fit). Legends and scale
+    /// bars drawn afterwards in a top corner avoid it.
     pub fn title(&mut self, text: &str) {
-        let mut s = self.text_scale + 1;
-        while s > 1 && text_size(text, s).0 + 8 * s > self.width() {
-            s -= 1;
+        let mut fs = 1.3 * self.font_px;
+        let fit = 0.95 * self.width() as f64;
+        let w0 = text_size(text, fs).0 as f64;
+        if w0 > fit {
+            fs = (fs * fit / w0).max(4.0);
         }
-        let (w, h) = text_size(text, s);
-        let pad = 3 * s as i64;
+        let (w, h) = text_size(text, fs);
+        let pad = (0.3 * fs).round() as i64;
         let cx = self.width() as i64 / 2;
         let y0 = (6.0 * self.unit) as i64;
         let x0 = cx - w as i64 / 2;
@@ -494,8 +481,15 @@ impl MapCanvas {
             color::WHITE,
             0.85,
         );
-        self.raster
-            .text(x0 as f64, y0 as f64, text, s, color::BLACK);
+        self.raster.text(
+            x0 as f64,
+            y0 as f64,
+            text,
+            fs,
+            color::BLACK,
+            Align::Start,
+            Align::Start,
+        );
     }
 
     /// Scale bar with an automatically chosen round length (about a sixth of
@@ -516,10 +510,10 @@ impl MapCanvas {
         if !(bar_px.is_finite() && bar_px >= 1.0) || bar_px > 4.0 * self.width() as f64 {
             return;
         }
-        let s = self.text_scale;
+        let fs = self.font_px;
         let label = format!("{} m", format_number(length_m));
-        let (tw, th) = text_size(&label, s);
-        let pad = 4.0 * s as f64;
+        let (tw, th) = text_size(&label, fs);
+        let pad = 0.3 * fs;
         let bar_h = (3.0 * self.unit).round().max(3.0);
         let w = bar_px.max(tw as f64) + 2.0 * pad;
         let h = pad + th as f64 + pad + bar_h + pad;
@@ -554,11 +548,11 @@ impl MapCanvas {
             1,
             color::BLACK,
         );
-        r.text_aligned(
+        r.text(
             x + w / 2.0,
             y + pad,
             &label,
-            s,
+            fs,
             color::BLACK,
             Align::Center,
             Align::Start,
@@ -600,64 +594,56 @@ fn format_number(v: f64) -> String {
     }
 }
 
-/// Geometry of a legend at font `scale`: (padding, swatch width, row height).
-fn legend_metrics(scale: u32) -> (u32, u32, u32) {
-    let s = scale.max(1);
-    (4 * s, 16 * s, (font::CAP_H + 5) * s)
+/// Geometry of a legend at font size `fs`: (padding, swatch width, row
+/// height), in pixels.
+fn legend_metrics(fs: f64) -> (f64, f64, f64) {
+    (0.4 * fs, 1.6 * fs, 1.25 * fs)
 }
 
-/// Pixel size `(w, h)` of the legend box for `entries` at font `scale`.
-pub(crate) fn legend_size(entries: &[(&str, Rgb, Mark)], scale: u32) -> (u32, u32) {
-    let (pad, sw, row) = legend_metrics(scale);
+/// Pixel size `(w, h)` of the legend box for `entries` at font size `fs`.
+fn legend_size(entries: &[(&str, Rgb, Mark)], fs: f64) -> (u32, u32) {
+    let (pad, sw, row) = legend_metrics(fs);
     let tw = entries
         .iter()
-        .map(|e| text_size(e.0, scale).0)
+        .map(|e| text_size(e.0, fs).0)
         .max()
-        .unwrap_or(0);
-    let n = entries.len() as u32;
-    let cap = font::CAP_H * scale.max(1);
+        .unwrap_or(0) as f64;
+    let n = entries.len() as f64;
     (
-        pad + sw + pad + tw + pad,
-        2 * pad + n.saturating_sub(1) * row + cap,
+        (pad + sw + pad + tw + pad).ceil() as u32,
+        (2.0 * pad + n * row).ceil() as u32,
     )
 }
 
 /// Draw a legend box with its top-left corner at `(x, y)`.
-pub(crate) fn draw_legend(
-    r: &mut Raster,
-    x: f64,
-    y: f64,
-    entries: &[(&str, Rgb, Mark)],
-    scale: u32,
-) {
-    let (w, h) = legend_size(entries, scale);
-    let (pad, sw, row) = legend_metrics(scale);
-    let s = scale.max(1) as f64;
+fn draw_legend(r: &mut Raster, x: f64, y: f64, entries: &[(&str, Rgb, Mark)], fs: f64) {
+    let (w, h) = legend_size(entries, fs);
+    let (pad, sw, row) = legend_metrics(fs);
+    let s = fs / 10.0;
     let (xi, yi) = (x.round() as i64, y.round() as i64);
     r.fill_rect_alpha(xi, yi, xi + w as i64, yi + h as i64, color::WHITE, 0.9);
     r.stroke_rect(xi, yi, xi + w as i64, yi + h as i64, 1, color::GRAY);
-    let cap = (font::CAP_H * scale.max(1)) as f64;
     for (i, &(label, c, mark)) in entries.iter().enumerate() {
-        let cy = yi as f64 + pad as f64 + i as f64 * row as f64 + cap / 2.0;
-        let (sx0, sx1) = (xi as f64 + pad as f64, xi as f64 + (pad + sw) as f64);
+        let cy = yi as f64 + pad + (i as f64 + 0.5) * row;
+        let (sx0, sx1) = (xi as f64 + pad, xi as f64 + pad + sw);
         let mid = (sx0 + sx1) / 2.0;
         match mark {
-            Mark::Dot => r.disc(mid, cy, 2.5 * s, c),
-            Mark::Ring => r.ring(mid, cy, 2.5 * s, 0.6 * s, c),
-            Mark::Line => r.line(sx0, cy, sx1, cy, 1.2 * s, c),
-            Mark::Dashed => r.dashed_line(sx0, cy, sx1, cy, 1.2 * s, 3.0 * s, 2.0 * s, c),
+            Mark::Dot => r.disc(mid, cy, 3.0 * s, c),
+            Mark::Ring => r.ring(mid, cy, 3.0 * s, 0.7 * s, c),
+            Mark::Line => r.line(sx0, cy, sx1, cy, 1.5 * s, c),
+            Mark::Dashed => r.dashed_line(sx0, cy, sx1, cy, 1.5 * s, 4.0 * s, 2.5 * s, c),
             Mark::Square => {
-                let hs = (cap / 2.0).round() as i64;
+                let hs = (0.35 * fs).round() as i64;
                 let (m, yc) = (mid.round() as i64, cy.round() as i64);
                 r.fill_rect(m - hs, yc - hs, m + hs, yc + hs, c);
             }
-            Mark::Arrow => r.arrow(sx0, cy, sx1, cy, 1.0 * s, 5.0 * s, c),
+            Mark::Arrow => r.arrow(sx0, cy, sx1, cy, 1.2 * s, 6.0 * s, c),
         }
-        r.text_aligned(
-            sx1 + pad as f64,
+        r.text(
+            sx1 + pad,
             cy,
             label,
-            scale,
+            fs,
             color::BLACK,
             Align::Start,
             Align::Center,

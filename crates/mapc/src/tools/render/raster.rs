@@ -1,12 +1,14 @@
-//! An RGB pixel buffer with anti-aliased drawing primitives, clipping and
-//! built-in bitmap text. Coordinates are pixels as `f64`, x right, y down;
+//! An RGB pixel buffer with anti-aliased drawing primitives clipped to the
+//! image;
+//! text (see `text.rs`) and charts are drawn into it through `plotters`. Coordinates are pixels as `f64`, x right, y down;
 //! pixel `(i, j)` covers `[i, i+1) x [j, j+1)`, so its centre is
 //! `(i + 0.5, j + 0.5)`.
 
 use std::io;
 use std::path::Path;
 
-use super::font;
+use plotters::coord::Shift;
+use plotters::prelude::{BitMapBackend, DrawingArea, IntoDrawingArea};
 
 /// An 8-bit RGB colour.
 pub type Rgb = [u8; 3];
@@ -22,7 +24,7 @@ pub enum Align {
     End,
 }
 
-/// Half-open clip rectangle in integer pixels.
+/// Half-open rectangle in integer pixels that drawing is clipped to (the image).
 #[derive(Debug, Clone, Copy)]
 struct Clip {
     x0: i64,
@@ -32,7 +34,7 @@ struct Clip {
 }
 
 /// An RGB image with drawing operations. All operations clip to the image
-/// (and to the optional clip rectangle) and silently ignore non-finite input.
+/// and silently ignore non-finite input.
 #[derive(Debug, Clone)]
 pub struct Raster {
     width: u32,
@@ -83,6 +85,11 @@ impl Raster {
         &self.buf
     }
 
+    /// A `plotters` drawing area over this image (for text and charts).
+    pub fn drawing_area(&mut self) -> DrawingArea<BitMapBackend<'_>, Shift> {
+        BitMapBackend::with_buffer(&mut self.buf, (self.width, self.height)).into_drawing_area()
+    }
+
     /// Colour of pixel `(x, y)`, or `None` outside the image.
     pub fn pixel(&self, x: i64, y: i64) -> Option<Rgb> {
         if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
@@ -92,27 +99,7 @@ impl Raster {
         Some([self.buf[i], self.buf[i + 1], self.buf[i + 2]])
     }
 
-    /// Restrict drawing to the half-open pixel rectangle `[x0, x1) x [y0, y1)`
-    /// (intersected with the image); `None` removes the restriction.
-    pub fn set_clip(&mut self, rect: Option<(i64, i64, i64, i64)>) {
-        let (w, h) = (self.width as i64, self.height as i64);
-        self.clip = match rect {
-            None => Clip {
-                x0: 0,
-                y0: 0,
-                x1: w,
-                y1: h,
-            },
-            Some((x0, y0, x1, y1)) => Clip {
-                x0: x0.clamp(0, w),
-                y0: y0.clamp(0, h),
-                x1: x1.clamp(0, w),
-                y1: y1.clamp(0, h),
-            },
-        };
-    }
-
-    /// Set pixel `(x, y)` to `c` (ignored outside the clip rectangle).
+    /// Set pixel `(x, y)` to `c` (ignored outside the image).
     pub fn put(&mut self, x: i64, y: i64, c: Rgb) {
         self.blend(x, y, c, 1.0);
     }
@@ -399,106 +386,6 @@ impl Raster {
         );
     }
 
-    /// Draw one line of `text` with its top-left corner at `(x, y)`; each
-    /// font pixel becomes a `scale` x `scale` block. Returns the text width.
-    pub fn text(&mut self, x: f64, y: f64, text: &str, scale: u32, c: Rgb) -> u32 {
-        self.text_impl(x, y, text, scale, c, false)
-    }
-
-    fn text_impl(&mut self, x: f64, y: f64, text: &str, scale: u32, c: Rgb, vertical: bool) -> u32 {
-        let (w, _) = font::text_size(text, scale);
-        if !x.is_finite() || !y.is_finite() {
-            return w;
-        }
-        let s = scale.max(1) as i64;
-        let (x0, y0) = (x.round() as i64, y.round() as i64);
-        for (i, ch) in text.chars().enumerate() {
-            let g = font::glyph(ch);
-            let gx0 = i as i64 * font::ADVANCE as i64;
-            for (row, bits) in g.iter().enumerate() {
-                for col in 0..font::GLYPH_W as i64 {
-                    if bits & (1 << (font::GLYPH_W as i64 - 1 - col)) == 0 {
-                        continue;
-                    }
-                    // Position along the text (u) and down the glyph (v).
-                    let (u, v) = ((gx0 + col) * s, row as i64 * s);
-                    let (px, py) = if vertical {
-                        // Rotated 90 degrees counter-clockwise: reads upwards,
-                        // (x, y) is the bottom-left corner of the rotated box.
-                        (x0 + v, y0 - u - s)
-                    } else {
-                        (x0 + u, y0 + v)
-                    };
-                    self.fill_rect(px, py, px + s, py + s, c);
-                }
-            }
-        }
-        w
-    }
-
-    /// Draw `text` positioned relative to `(x, y)` by `h`/`v` alignment.
-    #[allow(clippy::too_many_arguments)]
-    pub fn text_aligned(
-        &mut self,
-        x: f64,
-        y: f64,
-        text: &str,
-        scale: u32,
-        c: Rgb,
-        h: Align,
-        v: Align,
-    ) -> u32 {
-        let (w, ht) = font::text_size(text, scale);
-        let (x, y) = aligned_origin(x, y, w, ht, h, v);
-        self.text(x, y, text, scale, c)
-    }
-
-    /// Like [`Raster::text_aligned`] but first draws a `halo`-coloured
-    /// outline around every glyph so the text stays legible over busy images.
-    #[allow(clippy::too_many_arguments)]
-    pub fn text_halo(
-        &mut self,
-        x: f64,
-        y: f64,
-        text: &str,
-        scale: u32,
-        c: Rgb,
-        halo: Rgb,
-        h: Align,
-        v: Align,
-    ) -> u32 {
-        let (w, ht) = font::text_size(text, scale);
-        let (x, y) = aligned_origin(x, y, w, ht, h, v);
-        let s = scale.max(1) as f64;
-        for (dx, dy) in [
-            (-1, -1),
-            (0, -1),
-            (1, -1),
-            (-1, 0),
-            (1, 0),
-            (-1, 1),
-            (0, 1),
-            (1, 1),
-        ] {
-            self.text(x + dx as f64 * s, y + dy as f64 * s, text, scale, halo);
-        }
-        self.text(x, y, text, scale, c)
-    }
-
-    /// Draw `text` rotated 90 degrees counter-clockwise (reading bottom to
-    /// top), centred on `(x, y)`.
-    pub fn text_vertical(&mut self, x: f64, y: f64, text: &str, scale: u32, c: Rgb) {
-        let (w, ht) = font::text_size(text, scale);
-        self.text_impl(
-            x - ht as f64 / 2.0,
-            y + w as f64 / 2.0,
-            text,
-            scale,
-            c,
-            true,
-        );
-    }
-
     /// Blend the whole image towards `c` by `amount` in `[0, 1]` (e.g. to
     /// fade a background before drawing overlays). Ignores the clip.
     pub fn wash(&mut self, c: Rgb, amount: f64) {
@@ -535,19 +422,4 @@ pub(crate) fn image_err(e: image::ImageError) -> io::Error {
         image::ImageError::IoError(e) => e,
         other => io::Error::other(other),
     }
-}
-
-/// Top-left corner of a `w` x `h` box anchored at `(x, y)` with alignment.
-pub(crate) fn aligned_origin(x: f64, y: f64, w: u32, h: u32, ha: Align, va: Align) -> (f64, f64) {
-    let ox = match ha {
-        Align::Start => x,
-        Align::Center => x - w as f64 / 2.0,
-        Align::End => x - w as f64,
-    };
-    let oy = match va {
-        Align::Start => y,
-        Align::Center => y - h as f64 / 2.0,
-        Align::End => y - h as f64,
-    };
-    (ox, oy)
 }

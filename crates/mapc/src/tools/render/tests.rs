@@ -1,5 +1,4 @@
 use super::*;
-use std::collections::HashSet;
 
 const BG: Rgb = [255, 255, 255];
 
@@ -15,6 +14,17 @@ fn temp_png(name: &str) -> std::path::PathBuf {
         "mapc_render_{name}_{}_{nanos}.png",
         std::process::id()
     ))
+}
+
+/// A `w` x `h` map of 5 cm cells at the origin.
+fn blank_layer(gray: &[u8], w: u32, h: u32) -> MapLayer<'_> {
+    MapLayer {
+        width: w,
+        height: h,
+        gray,
+        resolution: 0.05,
+        origin: [0.0; 3],
+    }
 }
 
 fn count_color(r: &Raster, c: Rgb) -> usize {
@@ -124,42 +134,64 @@ fn pose_arrow_follows_heading_in_rotated_map() {
 
 #[test]
 fn text_renders_glyph_pixels_inside_its_box() {
-    let mut r = Raster::new(80, 30, BG);
-    let w = r.text(3.0, 4.0, "Ab1", 2, color::BLACK);
-    assert_eq!((w, font::text_size("Ab1", 2).1), (34, 14));
-    let ink: Vec<(i64, i64)> = (0..30)
-        .flat_map(|y| (0..80).map(move |x| (x, y)))
+    let mut r = Raster::new(120, 50, BG);
+    let (tw, th) = text_size("Abg1", 20.0);
+    assert_eq!(th, 20);
+    assert!((35..60).contains(&tw), "width {tw}");
+    let w = r.text(
+        3.0,
+        4.0,
+        "Abg1",
+        20.0,
+        color::BLACK,
+        Align::Start,
+        Align::Start,
+    );
+    assert_eq!(w, tw);
+    let ink: Vec<(i64, i64)> = (0..50)
+        .flat_map(|y| (0..120).map(move |x| (x, y)))
         .filter(|&(x, y)| r.pixel(x, y) != Some(BG))
         .collect();
-    assert!(ink.len() > 40, "only {} ink pixels", ink.len());
-    assert!(ink
-        .iter()
-        .all(|&(x, y)| (3..3 + 34).contains(&x) && (4..4 + 16).contains(&y)));
-    // Vertical text stays inside its rotated box as well.
-    let mut r = Raster::new(40, 60, BG);
-    r.text_vertical(20.0, 30.0, "xyz", 1, color::BLACK);
-    for y in 0..60 {
-        for x in 0..40 {
-            if r.pixel(x, y) != Some(BG) {
-                assert!((16..25).contains(&x) && (21..39).contains(&y), "({x},{y})");
-            }
-        }
+    assert!(ink.len() > 80, "only {} ink pixels", ink.len());
+    // Capitals and descenders stay inside the box (anti-aliasing may
+    // spill over by a pixel).
+    for &(x, y) in &ink {
+        assert!(
+            (2..=4 + tw as i64).contains(&x) && (3..=4 + th as i64).contains(&y),
+            "({x},{y})"
+        );
     }
+    let (ymin, ymax) = (ink.iter().map(|p| p.1).min(), ink.iter().map(|p| p.1).max());
+    assert!(ymin < Some(9) && ymax > Some(18), "{ymin:?}..{ymax:?}");
+    assert_eq!(text_size("", 12.0), (0, 12));
+    // Off-image and non-finite anchors draw nothing and do not panic.
+    let mut r = Raster::new(20, 20, BG);
+    r.text(
+        f64::NAN,
+        0.0,
+        "x",
+        10.0,
+        color::BLACK,
+        Align::Center,
+        Align::Center,
+    );
+    r.text(-1e9, 1e9, "x", 10.0, color::BLACK, Align::End, Align::End);
+    assert_eq!(count_color(&r, BG), 400);
 }
 
 #[test]
-fn font_glyphs_are_distinct_and_unknown_chars_are_boxes() {
-    let mut seen = HashSet::new();
-    for code in 33u8..=126 {
-        let g = font::glyph(code as char);
-        assert!(g.iter().any(|&row| row != 0), "glyph {code} empty");
-        assert!(g.iter().all(|&row| row < 32), "glyph {code} too wide");
-        assert!(seen.insert(g), "glyph {} duplicates another", code as char);
-    }
-    assert_eq!(font::glyph(' '), [0; 8]);
-    assert_eq!(font::glyph('\u{2603}'), font::glyph('\u{2604}'));
-    assert_ne!(font::glyph('θ'), font::glyph('\u{2603}'));
-    assert_eq!(text_size("", 3), (0, 21));
+fn text_and_canvas_drawing_is_deterministic() {
+    let gray = white_map(120, 80);
+    let map = blank_layer(&gray, 120, 80);
+    let draw = || {
+        let mut c = MapCanvas::with_long_side(&map, 600);
+        c.title("a title: θ and 12 sites");
+        c.label(2.0, 2.0, "17", color::DARK_GRAY);
+        c.legend(&[("pose", color::GREEN, Mark::Arrow)], Corner::TopRight);
+        c.scale_bar(Corner::BottomLeft);
+        c.into_raster()
+    };
+    assert_eq!(draw().as_bytes(), draw().as_bytes());
 }
 
 #[test]
