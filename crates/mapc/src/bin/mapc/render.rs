@@ -29,8 +29,8 @@ pub struct Args {
     /// Also draw this site's virtual scan, and write its PGR histogram to <OUT>-site<N>-hist.png.
     #[arg(long, value_name = "N")]
     pub site: Option<usize>,
-    /// Longest side of the image (pixels).
-    #[arg(long, default_value_t = 1600)]
+    /// Longest side of the image (pixels, 64 to 16384).
+    #[arg(long, default_value_t = 1600, value_parser = clap::value_parser!(u32).range(64..=16384))]
     pub size: u32,
     #[command(flatten)]
     pub opts: BuildOpts,
@@ -68,7 +68,47 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
                 .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", dir.display())))?;
         }
     }
-    // Gray image, top row first.
+    let gray = gray_image(g);
+    let layer = MapLayer {
+        width: g.width,
+        height: g.height,
+        gray: &gray,
+        resolution: g.resolution,
+        origin: g.origin,
+    };
+    let mut c = MapCanvas::with_long_side(&layer, a.size);
+    draw_graph(&mut c, &built);
+    if let Some(k) = a.site {
+        draw_site(&mut c, &built, k, &out, ui)?;
+    }
+    c.title(&format!(
+        "{}: GVD, graph and {} reference sites",
+        a.map
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        built.sites.len()
+    ));
+    c.legend(
+        &[
+            ("GVD", color::BLUE, Mark::Line),
+            ("site: vertex", color::RED, Mark::Dot),
+            ("site: end point", color::ORANGE, Mark::Dot),
+            ("site: on edge", color::GREEN, Mark::Dot),
+            ("site: coverage fill", color::PURPLE, Mark::Dot),
+        ],
+        Corner::TopRight,
+    );
+    c.scale_bar(Corner::BottomLeft);
+    c.save_png(&out)
+        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", out.display())))?;
+    outln!("{}", out.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The map as a gray image, top row first: free white, occupied dark,
+/// unknown the ROS gray.
+fn gray_image(g: &mapc::compiler::mapfile::OccupancyGrid) -> Vec<u8> {
     let (w, h) = (g.width, g.height);
     let mut gray = vec![0u8; (w * h) as usize];
     for cy in 0..h {
@@ -80,14 +120,12 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             };
         }
     }
-    let layer = MapLayer {
-        width: w,
-        height: h,
-        gray: &gray,
-        resolution: g.resolution,
-        origin: g.origin,
-    };
-    let mut c = MapCanvas::with_long_side(&layer, a.size);
+    gray
+}
+
+/// The GVD cells and edges, the site graph and the sites (labelled when
+/// there are at most 400).
+fn draw_graph(c: &mut MapCanvas, built: &pipeline::BuildOutput) {
     c.fill_cells(
         built.gvd.cells.iter().map(|&(x, y)| (x as i64, y as i64)),
         [170, 190, 255],
@@ -122,71 +160,58 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             c.label(s.x, s.y, &i.to_string(), color::DARK_GRAY);
         }
     }
-    if let Some(k) = a.site {
-        let s = built.sites.get(k).ok_or_else(|| {
-            input_err(anyhow::anyhow!(
-                "--site {k}: the map has {} sites",
-                built.sites.len()
-            ))
-        })?;
-        let p = &built.params.sensor;
-        let scan = &built.scans[k];
-        for (b, r) in scan.iter().enumerate() {
-            if r.is_finite() {
-                let ang = (p.angle_min + b as f32 * p.angle_increment) as f64;
-                let (ex, ey) = (s.x + *r as f64 * ang.cos(), s.y + *r as f64 * ang.sin());
-                c.line(s.x, s.y, ex, ey, 0.6, [255, 170, 170]);
-                c.dot(ex, ey, 2.0, color::RED);
-            }
+}
+
+/// Site `k`'s virtual scan on the map, and its PGR histogram written
+/// beside `out` as `<stem>-site<k>-hist.png`.
+fn draw_site(
+    c: &mut MapCanvas,
+    built: &pipeline::BuildOutput,
+    k: usize,
+    out: &std::path::Path,
+    ui: &Ui,
+) -> Result<(), crate::util::CliError> {
+    let s = built.sites.get(k).ok_or_else(|| {
+        input_err(anyhow::anyhow!(
+            "--site {k}: the map has {} sites",
+            built.sites.len()
+        ))
+    })?;
+    let p = &built.params.sensor;
+    let scan = &built.scans[k];
+    for (b, r) in scan.iter().enumerate() {
+        if r.is_finite() {
+            let ang = (p.angle_min + b as f32 * p.angle_increment) as f64;
+            let (ex, ey) = (s.x + *r as f64 * ang.cos(), s.y + *r as f64 * ang.sin());
+            c.line(s.x, s.y, ex, ey, 0.6, [255, 170, 170]);
+            c.dot(ex, ey, 2.0, color::RED);
         }
-        let hist = mapc::compiler::compile::scan_histogram(scan, &built.params);
-        let (rb, tb) = (
-            built.params.coarse.hist_rho_bins as usize,
-            built.params.coarse.hist_theta_bins as usize,
-        );
-        let chart = plot::heatmap(
-            &hist,
-            rb,
-            tb,
-            (-180.0, 180.0),
-            (0.0, built.params.coarse.hist_rho_max as f64),
-        )
-        .title(&format!("PGR histogram of site {k} (Fig. 9)"))
-        .x_label("theta (deg)")
-        .y_label("rho (m)")
-        .colorbar_label("share of pairs");
-        let hp = out.with_file_name(format!(
-            "{}-site{k}-hist.png",
-            out.file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default()
-        ));
-        chart
-            .save_png(&hp)
-            .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", hp.display())))?;
-        ui.note(&format!("histogram: {}", hp.display()));
     }
-    c.title(&format!(
-        "{}: GVD, graph and {} reference sites",
-        a.map
-            .file_name()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default(),
-        built.sites.len()
-    ));
-    c.legend(
-        &[
-            ("GVD", color::BLUE, Mark::Line),
-            ("site: vertex", color::RED, Mark::Dot),
-            ("site: end point", color::ORANGE, Mark::Dot),
-            ("site: on edge", color::GREEN, Mark::Dot),
-            ("site: coverage fill", color::PURPLE, Mark::Dot),
-        ],
-        Corner::TopRight,
+    let hist = mapc::compiler::compile::scan_histogram(scan, &built.params);
+    let (rb, tb) = (
+        built.params.coarse.hist_rho_bins as usize,
+        built.params.coarse.hist_theta_bins as usize,
     );
-    c.scale_bar(Corner::BottomLeft);
-    c.save_png(&out)
-        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", out.display())))?;
-    outln!("{}", out.display());
-    Ok(ExitCode::SUCCESS)
+    let chart = plot::heatmap(
+        &hist,
+        rb,
+        tb,
+        (-180.0, 180.0),
+        (0.0, built.params.coarse.hist_rho_max as f64),
+    )
+    .title(&format!("PGR histogram of site {k} (Fig. 9)"))
+    .x_label("theta (deg)")
+    .y_label("rho (m)")
+    .colorbar_label("share of pairs");
+    let hp = out.with_file_name(format!(
+        "{}-site{k}-hist.png",
+        out.file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    ));
+    chart
+        .save_png(&hp)
+        .map_err(|e| fail_err(anyhow::anyhow!("{}: {e}", hp.display())))?;
+    ui.note(&format!("histogram: {}", hp.display()));
+    Ok(())
 }
