@@ -84,7 +84,8 @@ count() { # count NAME ARGS...
 }
 
 # Each query's own count: with --dump-before, callgrind writes a profile
-# part at every entry into localize; with N+1 queries, part 1 is the set-up
+# part at every entry into localize_with_prior (`localize` itself is inlined, so
+# it has no entry to dump at); with N+1 queries, part 1 is the set-up
 # and parts 2..N+1 hold queries 0..N-1 alone (each with the few instructions
 # of the loop until the next entry). A dump on *leaving* localize is not
 # used: callgrind does not see every return, and splits some queries.
@@ -93,7 +94,7 @@ each() { # each NAME ARGS... -> "median p90 max" of the per-query counts
     shift
     rm -f "$WORK/$name.out"*
     valgrind --tool=callgrind --callgrind-out-file="$WORK/$name.out" \
-        --dump-before='refloc::localize::localize' "$@" >"$WORK/$name.log" 2>&1 ||
+        --dump-before='refloc::localize::localize_with_prior' "$@" >"$WORK/$name.log" 2>&1 ||
         { cat "$WORK/$name.log" >&2; die "valgrind run $name failed"; }
     for k in $(seq 2 $((N + 1))); do
         [ -s "$WORK/$name.out.$k" ] || die "valgrind run $name: no part $k"
