@@ -16,11 +16,12 @@
 //! other value out of range. A range that is infinite is no return.
 
 use std::fmt;
+use std::io;
 use std::marker::PhantomData;
 
 use serde::de::{DeserializeSeed, Deserializer, IgnoredAny, MapAccess, SeqAccess, Visitor};
-use serde::ser::{Error as _, Serializer};
 use serde::{Deserialize, Serialize};
+use serde_json::ser::{CharEscape, CompactFormatter, Formatter};
 use serde_json::value::RawValue;
 
 use super::{stored_angles, InputScan, ReadOptions, ScanData, ScanError, ScanErrorKind};
@@ -314,8 +315,7 @@ fn read_id(raw: &RawValue) -> Result<Option<String>, ScanErrorKind> {
     let id = match kind(raw) {
         "null" => return Ok(None),
         "a number" => number_id(raw.get()),
-        "a string" => String::deserialize(raw)
-            .map_err(|e| ScanErrorKind::Json(e.to_string()))?,
+        "a string" => String::deserialize(raw).map_err(|e| ScanErrorKind::Json(e.to_string()))?,
         other => {
             return Err(ScanErrorKind::WrongType {
                 field: "id".into(),
@@ -422,7 +422,13 @@ pub(super) fn parse_json_line(
         }
     }
     let id = record.id.take();
-    let fail = |kind| Err(ScanError { id: id.clone(), line, kind });
+    let fail = |kind| {
+        Err(ScanError {
+            id: id.clone(),
+            line,
+            kind,
+        })
+    };
     if let Err(e) = parsed {
         return fail(json_error(&e));
     }
@@ -551,77 +557,85 @@ fn check_angle_max(
 // ---------------------------------------------------------------------------
 // Writing.
 
-/// An f32 as JSON: `null` if it is not finite, else the shortest text that
-/// reads back as the same f32 (Rust's `{:?}`: `1.0`, `1e-7`, `-0.0`).
-struct F32(f32);
-
-/// An f64 as JSON, the same way as [`F32`].
-struct F64(f64);
-
-/// Writes a finite number as the text `{:?}` gives (serde_json's own
-/// formatting of floats differs from it, e.g. for `1e16`).
-fn serialize_float<S: Serializer>(s: S, finite: bool, text: fmt::Arguments<'_>) -> Result<S::Ok, S::Error> {
-    if !finite {
-        return s.serialize_none();
-    }
-    RawValue::from_string(text.to_string())
-        .map_err(S::Error::custom)?
-        .serialize(s)
-}
-
-impl Serialize for F32 {
-    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        serialize_float(s, self.0.is_finite(), format_args!("{:?}", self.0))
-    }
-}
-
-impl Serialize for F64 {
-    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        serialize_float(s, self.0.is_finite(), format_args!("{:?}", self.0))
-    }
-}
-
-/// The ranges of a scan as a JSON array.
-struct Ranges<'a>(&'a [f32]);
-
-impl Serialize for Ranges<'_> {
-    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.collect_seq(self.0.iter().map(|&r| F32(r)))
-    }
-}
-
-/// The points of a scan as a JSON array of `[x, y]` pairs.
-struct Points<'a>(&'a [[f32; 2]]);
-
-impl Serialize for Points<'_> {
-    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.collect_seq(self.0.iter().map(|p| [F32(p[0]), F32(p[1])]))
-    }
-}
-
 /// The record [`scan_to_json`] writes for a `Ranges` scan; the fields in
 /// this order.
 #[derive(Serialize)]
 struct RangesRecord<'a> {
     id: &'a str,
-    angle_min: F32,
-    angle_max: F32,
-    angle_increment: F32,
-    range_min: F32,
-    range_max: F32,
-    ranges: Ranges<'a>,
+    angle_min: f32,
+    angle_max: f32,
+    angle_increment: f32,
+    range_min: f32,
+    range_max: f32,
+    ranges: &'a [f32],
     #[serde(skip_serializing_if = "Option::is_none")]
-    truth: Option<[F64; 3]>,
+    truth: Option<[f64; 3]>,
 }
 
 /// The record [`scan_to_json`] writes for a `Points` scan.
 #[derive(Serialize)]
 struct PointsRecord<'a> {
     id: &'a str,
-    range_max: F32,
-    points: Points<'a>,
+    range_max: f32,
+    points: &'a [[f32; 2]],
     #[serde(skip_serializing_if = "Option::is_none")]
-    truth: Option<[F64; 3]>,
+    truth: Option<[f64; 3]>,
+}
+
+/// serde_json's compact output with the text `scan_to_json` has always
+/// written: a finite float as Rust's `{:?}` writes it, the shortest text
+/// that reads back as the same value (`1.0`, `1e-7`, `1e16`, `-0.0`), where
+/// serde_json's own formatting differs for some magnitudes (`1e16` is
+/// `10000000000000000.0` there); and backspace, form feed and DEL escaped
+/// as `\u0008`, `\u000c` and `\u007f`. (serde_json writes `null` for a
+/// float that is not finite itself.)
+struct Compact;
+
+impl Formatter for Compact {
+    fn write_f32<W: ?Sized + io::Write>(&mut self, w: &mut W, v: f32) -> io::Result<()> {
+        write!(w, "{v:?}")
+    }
+
+    fn write_f64<W: ?Sized + io::Write>(&mut self, w: &mut W, v: f64) -> io::Result<()> {
+        write!(w, "{v:?}")
+    }
+
+    fn write_char_escape<W: ?Sized + io::Write>(
+        &mut self,
+        w: &mut W,
+        escape: CharEscape,
+    ) -> io::Result<()> {
+        match escape {
+            CharEscape::Backspace => w.write_all(b"\\u0008"),
+            CharEscape::FormFeed => w.write_all(b"\\u000c"),
+            other => CompactFormatter.write_char_escape(w, other),
+        }
+    }
+
+    fn write_string_fragment<W: ?Sized + io::Write>(
+        &mut self,
+        w: &mut W,
+        fragment: &str,
+    ) -> io::Result<()> {
+        for (k, part) in fragment.split('\u{7f}').enumerate() {
+            if k > 0 {
+                w.write_all(b"\\u007f")?;
+            }
+            w.write_all(part.as_bytes())?;
+        }
+        Ok(())
+    }
+}
+
+fn to_json<T: Serialize>(record: &T) -> String {
+    let mut out = Vec::with_capacity(256);
+    let mut ser = serde_json::Serializer::with_formatter(&mut out, Compact);
+    // Writing plain structs of strings and numbers to memory cannot fail,
+    // and serde_json writes UTF-8.
+    match record.serialize(&mut ser) {
+        Ok(()) => String::from_utf8(out).unwrap_or_default(),
+        Err(_) => String::new(),
+    }
 }
 
 /// One JSON Lines record for `scan` (no trailing newline), readable by
@@ -631,8 +645,6 @@ struct PointsRecord<'a> {
 /// Reading the record back gives the same scan, bit for bit, as long as the
 /// ranges lie within `[range_min, range_max]` (others read back as `NaN`).
 pub fn scan_to_json(scan: &ScanData, id: &str, truth: Option<[f64; 3]>) -> String {
-    let truth = truth.map(|t| t.map(F64));
-    // Serializing plain structs, strings and valid number texts cannot fail.
     match scan {
         ScanData::Ranges {
             angle_min,
@@ -643,23 +655,22 @@ pub fn scan_to_json(scan: &ScanData, id: &str, truth: Option<[f64; 3]>) -> Strin
         } => {
             let last = ranges.len().saturating_sub(1) as f64;
             let angle_max = (*angle_min as f64 + last * *angle_increment as f64) as f32;
-            serde_json::to_string(&RangesRecord {
+            to_json(&RangesRecord {
                 id,
-                angle_min: F32(*angle_min),
-                angle_max: F32(angle_max),
-                angle_increment: F32(*angle_increment),
-                range_min: F32(*range_min),
-                range_max: F32(*range_max),
-                ranges: Ranges(ranges),
+                angle_min: *angle_min,
+                angle_max,
+                angle_increment: *angle_increment,
+                range_min: *range_min,
+                range_max: *range_max,
+                ranges,
                 truth,
             })
         }
-        ScanData::Points { points, range_max } => serde_json::to_string(&PointsRecord {
+        ScanData::Points { points, range_max } => to_json(&PointsRecord {
             id,
-            range_max: F32(*range_max),
-            points: Points(points),
+            range_max: *range_max,
+            points,
             truth,
         }),
     }
-    .unwrap_or_default()
 }

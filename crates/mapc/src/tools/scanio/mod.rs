@@ -255,7 +255,9 @@ pub enum ScanErrorKind {
     #[error("{0}")]
     Invalid(String),
     /// A bag whose records end early or are damaged (the stream ends here).
-    #[error("bag ends early or is damaged after byte {byte} ({what}); {read} messages of {topic} read")]
+    #[error(
+        "bag ends early or is damaged after byte {byte} ({what}); {read} messages of {topic} read"
+    )]
     BagDamaged {
         /// Bytes of the bag read.
         byte: u64,
@@ -921,7 +923,10 @@ fn parse_number<'a>(
         .ok_or_else(|| invalid(format!("{name} line ends before its {what}")))?;
     match parse_f64(Some(t)) {
         Some(v) if v.is_finite() => Ok(v),
-        _ => Err(invalid(format!("{name} {what} {} is not a finite number", show(t)))),
+        _ => Err(invalid(format!(
+            "{name} {what} {} is not a finite number",
+            show(t)
+        ))),
     }
 }
 

@@ -448,7 +448,10 @@ fn json_invalid_utf8_and_long_id() {
     line.extend_from_slice(br#"","points":[[1,2]]}"#);
     let v = read_all(&line, InputFormat::Auto, &ReadOptions::default());
     assert!(
-        v[0].as_ref().unwrap_err().message().contains("invalid JSON"),
+        v[0].as_ref()
+            .unwrap_err()
+            .message()
+            .contains("invalid JSON"),
         "{v:?}"
     );
     let v = read(
@@ -551,7 +554,10 @@ fn numbers_beyond_f64_range_read_as_infinite() {
         InputFormat::JsonLines,
     )
     .unwrap();
-    assert!(same(ranges_of(&s).4, &[f32::NAN, f32::NAN, 3.5, f32::NAN, f32::NAN]));
+    assert!(same(
+        ranges_of(&s).4,
+        &[f32::NAN, f32::NAN, 3.5, f32::NAN, f32::NAN]
+    ));
     let e = err(
         r#"{"angle_min":0,"angle_increment":0.5,"ranges":[1],"range_max":1e999}"#,
         InputFormat::JsonLines,
@@ -568,8 +574,17 @@ fn numbers_beyond_f64_range_read_as_infinite() {
     // A numeric id keeps the text it had: huge ones are clamped to 1e308.
     let e = err(r#"{"id":1e400,"points":[[1,2]]}"#, InputFormat::JsonLines);
     assert_eq!(e.kind, ScanErrorKind::IdTooLong(309));
-    for (id, text) in [("-0", "-0"), ("-5", "-5"), ("1e2", "100"), ("18446744073709551616", "18446744073709552000")] {
-        let s = one(&format!(r#"{{"id":{id},"points":[[1,2]]}}"#), InputFormat::JsonLines).unwrap();
+    for (id, text) in [
+        ("-0", "-0"),
+        ("-5", "-5"),
+        ("1e2", "100"),
+        ("18446744073709551616", "18446744073709552000"),
+    ] {
+        let s = one(
+            &format!(r#"{{"id":{id},"points":[[1,2]]}}"#),
+            InputFormat::JsonLines,
+        )
+        .unwrap();
         assert_eq!(s.id, text);
     }
 }
@@ -587,7 +602,11 @@ fn auto_sniffs_and_reports_undecidable_lines() {
     assert!(e.message().contains("cannot tell the input format"), "{e}");
     assert!(v[1].is_ok());
     // Once JSON, a CARMEN line is a JSON error.
-    assert!(v[2].as_ref().unwrap_err().message().contains("invalid JSON"));
+    assert!(v[2]
+        .as_ref()
+        .unwrap_err()
+        .message()
+        .contains("invalid JSON"));
 
     let v = read(
         "\u{feff}PARAM x 1\nFLASER 1 1 0 0 0 0 0 0\n{\"points\":[[1,2]]}\n",
@@ -679,7 +698,10 @@ fn carmen_fov_override_and_rear_laser() {
             &opts,
         );
         assert!(
-            v[0].as_ref().unwrap_err().message().contains("field of view"),
+            v[0].as_ref()
+                .unwrap_err()
+                .message()
+                .contains("field of view"),
             "{v:?}"
         );
     }
@@ -1008,6 +1030,37 @@ fn scan_to_json_round_trips_ranges() {
     assert!(v["ranges"][3].is_null());
 }
 
+/// The exact text `scan_to_json` writes (as the hand-written writer before
+/// serde_json did): floats as `{:?}` (`1e16`, `3e-6`, `-0.0`), `null` for
+/// values that are not finite, control characters as `\u00XX` except
+/// `\n`, `\r`, `\t`.
+#[test]
+fn scan_to_json_text_is_fixed() {
+    let d = ScanData::Ranges {
+        angle_min: -0.0,
+        angle_increment: 1e-7,
+        range_min: 1e16,
+        range_max: f32::MAX,
+        ranges: vec![f32::NAN, 1.0, 0.1, f32::INFINITY, 3e-6],
+    };
+    assert_eq!(
+        scan_to_json(
+            &d,
+            "a\u{8}\u{c}\u{7f}\"\\\n\u{1}é",
+            Some([1.0, -0.0, f64::NAN])
+        ),
+        r#"{"id":"a\u0008\u000c\u007f\"\\\n\u0001é","angle_min":-0.0,"angle_max":4e-7,"angle_increment":1e-7,"range_min":1e16,"range_max":3.4028235e38,"ranges":[null,1.0,0.1,null,3e-6],"truth":[1.0,-0.0,null]}"#
+    );
+    let d = ScanData::Points {
+        points: vec![[1e-45, -1e38], [2.5, 0.0]],
+        range_max: 30.0,
+    };
+    assert_eq!(
+        scan_to_json(&d, "p", None),
+        r#"{"id":"p","range_max":30.0,"points":[[1e-45,-1e38],[2.5,0.0]]}"#
+    );
+}
+
 /// The angle limits hold for the f32 values a scan keeps, not only for the
 /// f64 values read (fuzz findings `angle-min-f32-rounds-past-limit` and
 /// `increment-f32-rounds-past-full-turn`): every record accepted near a
@@ -1078,7 +1131,10 @@ fn angles_are_checked_as_stored_f32() {
     // An increment that is 0 or infinite as f32 is rejected, not stored.
     for inc in ["1e-50", "-1e-46"] {
         let e = err(&record("0", inc, 2), InputFormat::JsonLines);
-        assert!(e.message().contains("32-bit float (rounds to"), "{inc}: {e}");
+        assert!(
+            e.message().contains("32-bit float (rounds to"),
+            "{inc}: {e}"
+        );
     }
     let e = err(&record("0", "1e300", 1), InputFormat::JsonLines);
     assert!(e.message().contains("32-bit float (rounds to inf)"), "{e}");
