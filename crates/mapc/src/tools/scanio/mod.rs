@@ -285,18 +285,21 @@ pub enum InputFormat {
     Carmen,
 }
 
+/// A name that [`InputFormat::from_str`] does not know.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown input format {0:?}: expected auto, jsonl or carmen")]
+pub struct UnknownInputFormat(pub String);
+
 impl FromStr for InputFormat {
-    type Err = String;
+    type Err = UnknownInputFormat;
 
     /// Parses `auto`, `jsonl` (or `json`, `jsonlines`) and `carmen`.
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, UnknownInputFormat> {
         match s.to_ascii_lowercase().as_str() {
             "auto" => Ok(InputFormat::Auto),
             "jsonl" | "json" | "jsonlines" | "json-lines" => Ok(InputFormat::JsonLines),
             "carmen" | "log" => Ok(InputFormat::Carmen),
-            _ => Err(format!(
-                "unknown input format {s:?}: expected auto, jsonl or carmen"
-            )),
+            _ => Err(UnknownInputFormat(s.to_owned())),
         }
     }
 }
