@@ -645,30 +645,24 @@ fn to_json<T: Serialize>(record: &T) -> String {
 /// Reading the record back gives the same scan, bit for bit, as long as the
 /// ranges lie within `[range_min, range_max]` (others read back as `NaN`).
 pub fn scan_to_json(scan: &ScanData, id: &str, truth: Option<[f64; 3]>) -> String {
-    match scan {
-        ScanData::Ranges {
-            angle_min,
-            angle_increment,
-            range_min,
-            range_max,
-            ranges,
-        } => {
-            let last = ranges.len().saturating_sub(1) as f64;
-            let angle_max = (*angle_min as f64 + last * *angle_increment as f64) as f32;
+    match scan.as_scan() {
+        refloc::Scan::Ranges(r) => {
+            let last = r.ranges.len().saturating_sub(1) as f64;
+            let angle_max = (r.angle_min as f64 + last * r.angle_increment as f64) as f32;
             to_json(&RangesRecord {
                 id,
-                angle_min: *angle_min,
+                angle_min: r.angle_min,
                 angle_max,
-                angle_increment: *angle_increment,
-                range_min: *range_min,
-                range_max: *range_max,
-                ranges,
+                angle_increment: r.angle_increment,
+                range_min: r.range_min,
+                range_max: r.range_max,
+                ranges: r.ranges,
                 truth,
             })
         }
-        ScanData::Points { points, range_max } => to_json(&PointsRecord {
+        refloc::Scan::Points { points, range_max } => to_json(&PointsRecord {
             id,
-            range_max: *range_max,
+            range_max,
             points,
             truth,
         }),
