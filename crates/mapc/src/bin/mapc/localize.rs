@@ -249,10 +249,10 @@ fn unreadable_line(e: &scanio::ScanError, text: bool) -> String {
         format!(
             "{:<12} error: {}",
             e.id.clone().unwrap_or_else(|| format!("line {}", e.line)),
-            e.message
+            e.kind
         )
     } else {
-        json!({"id": e.id, "line": e.line, "error": e.message}).to_string()
+        json!({"id": e.id, "line": e.line, "error": e.message()}).to_string()
     }
 }
 

@@ -18,7 +18,7 @@ use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOp
 use thiserror::Error;
 
 use super::cdr::{decode_laser_scan, CdrError};
-use super::{InputScan, ReadOptions, ScanData, ScanError};
+use super::{InputScan, ReadOptions, ScanData, ScanError, ScanErrorKind};
 
 /// The MCAP magic: the first 8 bytes of every MCAP file.
 pub const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
@@ -400,10 +400,12 @@ impl Iterator for BagScans {
                     return Some(Err(ScanError {
                         id: None,
                         line: self.k + 1,
-                        message: format!(
-                            "bag ends early or is damaged after byte {} ({what}); {} messages of {} read",
-                            self.stream.bytes, self.k, self.topic
-                        ),
+                        kind: ScanErrorKind::BagDamaged {
+                            byte: self.stream.bytes,
+                            what,
+                            read: self.k,
+                            topic: self.topic.clone(),
+                        },
                     }));
                 }
             }
@@ -425,7 +427,7 @@ fn to_scan(
     let err = |message: String| ScanError {
         id: Some(id.clone()),
         line: k + 1,
-        message,
+        kind: ScanErrorKind::Invalid(message),
     };
     let m = decode_laser_scan(data, opts.max_beams)
         .map_err(|e: CdrError| err(format!("LaserScan CDR: {e}")))?;
@@ -794,7 +796,7 @@ mod tests {
         let msg = match read_all(&b) {
             Err(e) => e.to_string(),
             Ok(items) => match items.into_iter().find_map(Result::err) {
-                Some(e) => e.message,
+                Some(e) => e.message(),
                 None => panic!("an unknown compression read without error"),
             },
         };

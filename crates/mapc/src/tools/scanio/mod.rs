@@ -25,19 +25,20 @@
 //! line; only an I/O error (e.g. a truncated gzip stream) ends the stream.
 
 use std::f64::consts::{PI, TAU};
-use std::fmt;
 use std::fs::File;
 use std::io::{self, BufRead, BufReader, Read};
 use std::path::Path;
 use std::str::FromStr;
 
 use flate2::read::MultiGzDecoder;
-use serde::de::{self, DeserializeSeed, Deserializer, IgnoredAny, MapAccess, SeqAccess, Visitor};
 
 pub mod bag;
 pub mod cdr;
+mod jsonl;
 #[cfg(test)]
 mod tests;
+
+pub use jsonl::scan_to_json;
 
 /// One scan read from the input.
 #[derive(Clone, Debug, PartialEq)]
@@ -160,27 +161,114 @@ impl ScanData {
 ///
 /// Displays as `line 12 (id scan-3): ranges[4] is a string, expected a number
 /// or null`, or `line 12: ...` when the line's id is unknown.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("line {line}{}: {kind}", .id.as_ref().map(|id| format!(" (id {id})")).unwrap_or_default())]
 pub struct ScanError {
     /// The scan's id if it is known (the JSON `id`, or `"scan K"` for a
-    /// CARMEN laser line).
+    /// CARMEN laser line, `"msg K"` for a bag message).
     pub id: Option<String>,
-    /// 1-based line number in the input.
+    /// 1-based line number in the input (message number in a bag).
     pub line: usize,
     /// What is wrong, naming the field.
-    pub message: String,
+    pub kind: ScanErrorKind,
 }
 
-impl fmt::Display for ScanError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match &self.id {
-            Some(id) => write!(f, "line {} (id {}): {}", self.line, id, self.message),
-            None => write!(f, "line {}: {}", self.line, self.message),
-        }
+impl ScanError {
+    /// What is wrong, as text (the error's display without the line and id).
+    pub fn message(&self) -> String {
+        self.kind.to_string()
     }
 }
 
-impl std::error::Error for ScanError {}
+/// What is wrong with one input line (or bag message): [`ScanError::kind`].
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum ScanErrorKind {
+    /// Reading the input failed (the stream ends here).
+    #[error("read error: {0}")]
+    Read(String),
+    /// The line is longer than [`ReadOptions::max_line_bytes`].
+    #[error("line is {len} bytes long, more than max_line_bytes = {max}")]
+    LineTooLong {
+        /// Its length (bytes).
+        len: u64,
+        /// The limit.
+        max: usize,
+    },
+    /// [`InputFormat::Auto`] could not tell the format from the line (its
+    /// start, escaped).
+    #[error(
+        "cannot tell the input format from {0}: expected '{{' (JSON Lines) or an uppercase \
+         CARMEN keyword such as FLASER"
+    )]
+    UnknownFormat(String),
+    /// Not valid JSON, or not an object (serde_json's message and column).
+    #[error("invalid JSON: {0}")]
+    Json(String),
+    /// A field of a JSON record appears twice.
+    #[error("field {0} appears more than once")]
+    DuplicateField(&'static str),
+    /// A JSON value of the wrong kind.
+    #[error("{field} is {found}, expected {expected}")]
+    WrongType {
+        /// The field (`ranges[4]` for an element).
+        field: String,
+        /// What it is: `a string`, `null`, `an array of length other than 2`...
+        found: &'static str,
+        /// What it should be.
+        expected: &'static str,
+    },
+    /// A number (or one of the numbers) of the field is not finite.
+    #[error("{0} is not finite")]
+    NotFinite(String),
+    /// The JSON `id` is longer than 256 bytes (its length).
+    #[error("id is {0} bytes long, more than {max}", max = jsonl::MAX_ID_BYTES)]
+    IdTooLong(usize),
+    /// The JSON `id` contains a control character.
+    #[error("id contains a control character")]
+    IdControlCharacter,
+    /// `ranges` or `points` has more than [`ReadOptions::max_beams`] entries.
+    #[error("{field} has {count} entries, more than max_beams = {max}")]
+    TooManyEntries {
+        /// `ranges` or `points`.
+        field: &'static str,
+        /// Its entries.
+        count: usize,
+        /// The limit.
+        max: usize,
+    },
+    /// A required JSON field is missing.
+    #[error("missing field {0}")]
+    MissingField(&'static str),
+    /// `ranges` or `points` is empty.
+    #[error("{0} is empty")]
+    Empty(&'static str),
+    /// A JSON record has both `ranges` and `points`.
+    #[error("both ranges and points given; expected one of them")]
+    RangesAndPoints,
+    /// A line of a CARMEN log that does not start with a keyword (its first
+    /// field, escaped).
+    #[error("not a CARMEN line: {0} is not an uppercase keyword such as FLASER")]
+    NotCarmen(String),
+    /// A value out of its range, a field missing from a CARMEN line, counts
+    /// that disagree, an undecodable bag message: the message names the
+    /// field and the value.
+    #[error("{0}")]
+    Invalid(String),
+    /// A bag whose records end early or are damaged (the stream ends here).
+    #[error(
+        "bag ends early or is damaged after byte {byte} ({what}); {read} messages of {topic} read"
+    )]
+    BagDamaged {
+        /// Bytes of the bag read.
+        byte: u64,
+        /// What went wrong.
+        what: String,
+        /// Messages of the topic read before.
+        read: usize,
+        /// The topic.
+        topic: String,
+    },
+}
 
 /// Input format of [`read_scans`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -197,18 +285,21 @@ pub enum InputFormat {
     Carmen,
 }
 
+/// A name that [`InputFormat::from_str`] does not know.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown input format {0:?}: expected auto, jsonl or carmen")]
+pub struct UnknownInputFormat(pub String);
+
 impl FromStr for InputFormat {
-    type Err = String;
+    type Err = UnknownInputFormat;
 
     /// Parses `auto`, `jsonl` (or `json`, `jsonlines`) and `carmen`.
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, UnknownInputFormat> {
         match s.to_ascii_lowercase().as_str() {
             "auto" => Ok(InputFormat::Auto),
             "jsonl" | "json" | "jsonlines" | "json-lines" => Ok(InputFormat::JsonLines),
             "carmen" | "log" => Ok(InputFormat::Carmen),
-            _ => Err(format!(
-                "unknown input format {s:?}: expected auto, jsonl or carmen"
-            )),
+            _ => Err(UnknownInputFormat(s.to_owned())),
         }
     }
 }
@@ -364,108 +455,6 @@ fn read_poses_at_most(path: &Path, max: usize) -> io::Result<Vec<(usize, [f64; 3
 /// stream that never ends (a FIFO, a device) cannot exhaust memory.
 pub const MAX_POSES: usize = 4 << 20;
 
-/// One JSON Lines record for `scan` (no trailing newline), readable by
-/// [`read_scans`]: `NaN` and infinite ranges are written as `null`, `ranges`
-/// records also get the matching `angle_max`, and `truth` (if any) is
-/// written as `[x, y, theta]` (metres, radians). Reading the record back
-/// gives the same scan, bit for bit, as long as the ranges lie within
-/// `[range_min, range_max]` (others read back as `NaN`).
-pub fn scan_to_json(scan: &ScanData, id: &str, truth: Option<[f64; 3]>) -> String {
-    let mut s = String::with_capacity(64 + 10 * scan.len());
-    s.push_str("{\"id\":");
-    push_json_string(&mut s, id);
-    match scan {
-        ScanData::Ranges {
-            angle_min,
-            angle_increment,
-            range_min,
-            range_max,
-            ranges,
-        } => {
-            let last = ranges.len().saturating_sub(1) as f64;
-            let angle_max = (*angle_min as f64 + last * *angle_increment as f64) as f32;
-            for (name, v) in [
-                ("angle_min", *angle_min),
-                ("angle_max", angle_max),
-                ("angle_increment", *angle_increment),
-                ("range_min", *range_min),
-                ("range_max", *range_max),
-            ] {
-                s.push_str(",\"");
-                s.push_str(name);
-                s.push_str("\":");
-                push_f32(&mut s, v);
-            }
-            s.push_str(",\"ranges\":[");
-            for (k, &r) in ranges.iter().enumerate() {
-                if k > 0 {
-                    s.push(',');
-                }
-                push_f32(&mut s, r);
-            }
-            s.push(']');
-        }
-        ScanData::Points { points, range_max } => {
-            s.push_str(",\"range_max\":");
-            push_f32(&mut s, *range_max);
-            s.push_str(",\"points\":[");
-            for (k, p) in points.iter().enumerate() {
-                if k > 0 {
-                    s.push(',');
-                }
-                s.push('[');
-                push_f32(&mut s, p[0]);
-                s.push(',');
-                push_f32(&mut s, p[1]);
-                s.push(']');
-            }
-            s.push(']');
-        }
-    }
-    if let Some(t) = truth {
-        s.push_str(",\"truth\":[");
-        for (k, v) in t.iter().enumerate() {
-            if k > 0 {
-                s.push(',');
-            }
-            if v.is_finite() {
-                s.push_str(&format!("{v:?}"));
-            } else {
-                s.push_str("null");
-            }
-        }
-        s.push(']');
-    }
-    s.push('}');
-    s
-}
-
-fn push_f32(s: &mut String, v: f32) {
-    if v.is_finite() {
-        // `{:?}` is the shortest text that reads back as the same f32, and
-        // always valid JSON for finite values (`1.0`, `1e-7`, `-0.0`).
-        s.push_str(&format!("{v:?}"));
-    } else {
-        s.push_str("null");
-    }
-}
-
-fn push_json_string(s: &mut String, v: &str) {
-    s.push('"');
-    for c in v.chars() {
-        match c {
-            '"' => s.push_str("\\\""),
-            '\\' => s.push_str("\\\\"),
-            '\n' => s.push_str("\\n"),
-            '\r' => s.push_str("\\r"),
-            '\t' => s.push_str("\\t"),
-            c if (c as u32) < 0x20 || c == '\u{7f}' => s.push_str(&format!("\\u{:04x}", c as u32)),
-            c => s.push(c),
-        }
-    }
-    s.push('"');
-}
-
 // ---------------------------------------------------------------------------
 // Bounded line reader.
 
@@ -591,7 +580,7 @@ impl<R: BufRead> Iterator for Scans<R> {
                     return Some(Err(ScanError {
                         id: None,
                         line,
-                        message: format!("read error: {e}"),
+                        kind: ScanErrorKind::Read(e.to_string()),
                     }));
                 }
                 RawLine::TooLong { len, prefix } => {
@@ -608,11 +597,11 @@ impl<R: BufRead> Iterator for Scans<R> {
                         InputFormat::Carmen => self.carmen.count_if_laser(prefix),
                         _ => None,
                     };
-                    let message = format!(
-                        "line is {len} bytes long, more than max_line_bytes = {}",
-                        self.opts.max_line_bytes
-                    );
-                    return Some(Err(ScanError { id, line, message }));
+                    let kind = ScanErrorKind::LineTooLong {
+                        len,
+                        max: self.opts.max_line_bytes,
+                    };
+                    return Some(Err(ScanError { id, line, kind }));
                 }
             };
             let text = strip_bom(line, text).trim_ascii();
@@ -626,15 +615,10 @@ impl<R: BufRead> Iterator for Scans<R> {
                         f
                     }
                     None => {
-                        let message = format!(
-                            "cannot tell the input format from {}: expected '{{' (JSON Lines) or an uppercase \
-                             CARMEN keyword such as FLASER",
-                            show(text)
-                        );
                         return Some(Err(ScanError {
                             id: None,
                             line,
-                            message,
+                            kind: ScanErrorKind::UnknownFormat(show(text)),
                         }));
                     }
                 },
@@ -645,7 +629,7 @@ impl<R: BufRead> Iterator for Scans<R> {
                     Some(item) => return Some(item),
                     None => continue,
                 },
-                _ => return Some(parse_json_line(text, line, &self.opts)),
+                _ => return Some(jsonl::parse_json_line(text, line, &self.opts)),
             }
         }
     }
@@ -696,15 +680,19 @@ fn parse_f64(t: Option<&[u8]>) -> Option<f64> {
     std::str::from_utf8(t?).ok()?.parse::<f64>().ok()
 }
 
-fn range_max_from_opts(opts: &ReadOptions) -> Result<f32, String> {
+fn range_max_from_opts(opts: &ReadOptions) -> Result<f32, ScanErrorKind> {
     let r = opts.range_max;
     if r.is_finite() && r > 0.0 {
         Ok(r)
     } else {
-        Err(format!(
+        Err(invalid(format!(
             "the default range_max ({r}) is not a positive number of metres"
-        ))
+        )))
     }
+}
+
+fn invalid(message: String) -> ScanErrorKind {
+    ScanErrorKind::Invalid(message)
 }
 
 /// Largest |angle| (rad) accepted for a first bearing or a step.
@@ -724,704 +712,33 @@ fn stored_angles(
     inc: f64,
     n: usize,
     names: [&str; 2],
-) -> Result<(f32, f32), String> {
+) -> Result<(f32, f32), ScanErrorKind> {
     let [min_name, inc_name] = names;
     let (min32, inc32) = (angle_min as f32, inc as f32);
     if !inc.is_finite() {
-        return Err(format!("{inc_name} is not finite"));
+        return Err(ScanErrorKind::NotFinite(inc_name.into()));
     }
     if inc == 0.0 {
-        return Err(format!("{inc_name} is 0"));
+        return Err(invalid(format!("{inc_name} is 0")));
     }
     if !inc32.is_finite() || inc32 == 0.0 {
-        return Err(format!(
+        return Err(invalid(format!(
             "{inc_name} ({inc}) is out of the range of a 32-bit float (rounds to {inc32})"
-        ));
+        )));
     }
     let (angle_min, inc) = (min32 as f64, inc32 as f64);
     if !angle_min.is_finite() || angle_min.abs() > ANGLE_LIMIT {
-        return Err(format!(
+        return Err(invalid(format!(
             "{min_name} ({min32}) is not a finite angle within [-2 pi, 2 pi] rad"
-        ));
+        )));
     }
     let span = n.saturating_sub(1) as f64 * inc.abs();
     if span > TAU * (1.0 + 1e-4) + 1e-6 {
-        return Err(format!(
+        return Err(invalid(format!(
             "{n} beams at angle_increment {inc32} rad span {span:.4} rad, more than a full turn"
-        ));
+        )));
     }
     Ok((min32, inc32))
-}
-
-// ---------------------------------------------------------------------------
-// JSON Lines.
-
-/// Magnitudes from this on are taken as infinite (serde_json refuses numbers
-/// beyond f64 range; [`clamp_overflowing_numbers`] rewrites them to this).
-const JSON_HUGE: f64 = 1e308;
-
-/// Longest accepted `id` (bytes).
-const MAX_ID_BYTES: usize = 256;
-
-#[derive(Default)]
-struct RawRecord {
-    id: Option<String>,
-    angle_min: Option<f64>,
-    angle_max: Option<f64>,
-    angle_increment: Option<f64>,
-    range_min: Option<f64>,
-    range_max: Option<f64>,
-    ranges: Option<Vec<f32>>,
-    points: Option<Vec<[f32; 2]>>,
-    truth: Option<[f64; 3]>,
-    /// The first problem found (the line is an error).
-    problem: Option<String>,
-}
-
-impl RawRecord {
-    fn problem(&mut self, msg: String) {
-        if self.problem.is_none() {
-            self.problem = Some(msg);
-        }
-    }
-}
-
-fn parse_json_line(text: &[u8], line: usize, opts: &ReadOptions) -> Result<InputScan, ScanError> {
-    let mut raw = RawRecord::default();
-    let mut res = deserialize_record(text, &mut raw, opts.max_beams);
-    if matches!(&res, Err(e) if e.to_string().starts_with("number out of range")) {
-        if let Some(fixed) = clamp_overflowing_numbers(text) {
-            raw = RawRecord::default();
-            res = deserialize_record(&fixed, &mut raw, opts.max_beams);
-        }
-    }
-    if let Err(e) = res {
-        return Err(ScanError {
-            id: raw.id,
-            line,
-            message: json_error_message(&e),
-        });
-    }
-    if let Some(message) = raw.problem.take() {
-        return Err(ScanError {
-            id: raw.id,
-            line,
-            message,
-        });
-    }
-    let id = raw.id.take();
-    match build_json_scan(raw, opts) {
-        Ok((data, truth)) => Ok(InputScan {
-            id: id.unwrap_or_else(|| format!("line {line}")),
-            line,
-            data,
-            truth,
-            stamp: None,
-        }),
-        Err(message) => Err(ScanError { id, line, message }),
-    }
-}
-
-fn deserialize_record(
-    text: &[u8],
-    raw: &mut RawRecord,
-    max_beams: usize,
-) -> Result<(), serde_json::Error> {
-    let mut de = serde_json::Deserializer::from_slice(text);
-    RecordSeed { raw, max_beams }.deserialize(&mut de)?;
-    de.end()
-}
-
-fn json_error_message(e: &serde_json::Error) -> String {
-    let s = e.to_string();
-    let base = match s.rfind(" at line ") {
-        Some(i) => &s[..i],
-        None => &s[..],
-    };
-    if e.column() > 0 {
-        format!("invalid JSON: {base} at column {}", e.column())
-    } else {
-        format!("invalid JSON: {base}")
-    }
-}
-
-/// Rewrites numbers outside f64 range (outside strings) as `±1e308`, which
-/// is no longer than any such number; `None` if there were none.
-fn clamp_overflowing_numbers(text: &[u8]) -> Option<Vec<u8>> {
-    let mut out = Vec::with_capacity(text.len());
-    let mut changed = false;
-    let mut in_string = false;
-    let mut i = 0;
-    while i < text.len() {
-        let b = text[i];
-        if in_string {
-            out.push(b);
-            if b == b'\\' {
-                if let Some(&next) = text.get(i + 1) {
-                    out.push(next);
-                    i += 1;
-                }
-            } else if b == b'"' {
-                in_string = false;
-            }
-            i += 1;
-        } else if b == b'"' {
-            in_string = true;
-            out.push(b);
-            i += 1;
-        } else if b == b'-' || b.is_ascii_digit() {
-            let start = i;
-            while i < text.len()
-                && matches!(text[i], b'0'..=b'9' | b'-' | b'+' | b'.' | b'e' | b'E')
-            {
-                i += 1;
-            }
-            let tok = &text[start..i];
-            match parse_f64(Some(tok)) {
-                Some(v) if v.is_infinite() => {
-                    out.extend_from_slice(if v < 0.0 { b"-1e308" } else { b"1e308" });
-                    changed = true;
-                }
-                _ => out.extend_from_slice(tok),
-            }
-        } else {
-            out.push(b);
-            i += 1;
-        }
-    }
-    changed.then_some(out)
-}
-
-fn build_json_scan(
-    raw: RawRecord,
-    opts: &ReadOptions,
-) -> Result<(ScanData, Option<[f64; 3]>), String> {
-    let range_max = match raw.range_max {
-        Some(r) if r.is_finite() && r > 0.0 && (r as f32).is_finite() => r as f32,
-        Some(r) => {
-            return Err(format!(
-                "range_max ({r}) is not a positive finite number of metres"
-            ))
-        }
-        None => range_max_from_opts(opts)?,
-    };
-    let data = match (raw.ranges, raw.points) {
-        (Some(_), Some(_)) => {
-            return Err("both ranges and points given; expected one of them".into())
-        }
-        (None, None) => return Err("missing field ranges (or points)".into()),
-        (Some(mut ranges), None) => {
-            let angle_min = raw.angle_min.ok_or("missing field angle_min")?;
-            let inc = raw.angle_increment.ok_or("missing field angle_increment")?;
-            if ranges.is_empty() {
-                return Err("ranges is empty".into());
-            }
-            let (min32, inc32) = stored_angles(
-                angle_min,
-                inc,
-                ranges.len(),
-                ["angle_min", "angle_increment"],
-            )?;
-            // From here on, the values the scan keeps.
-            let (angle_min, inc) = (min32 as f64, inc32 as f64);
-            if let Some(angle_max) = raw.angle_max {
-                let expected = angle_min + (ranges.len() - 1) as f64 * inc;
-                // Loose: some drivers write angle_min + n * increment.
-                if !angle_max.is_finite()
-                    || (angle_max - expected).abs() > inc.abs() * (1.0 + 1e-3) + 1e-6
-                {
-                    return Err(format!(
-                        "angle_max ({angle_max}) disagrees with angle_min + (n - 1) * angle_increment = {expected} \
-                         (n = {}) by more than one increment",
-                        ranges.len()
-                    ));
-                }
-            }
-            let range_min = match raw.range_min {
-                None => 0.0,
-                Some(r) if r.is_finite() && r >= 0.0 && (r as f32) < range_max => r as f32,
-                Some(r) => {
-                    return Err(format!(
-                        "range_min ({r}) is not a finite number of metres in [0, range_max)"
-                    ));
-                }
-            };
-            for r in ranges.iter_mut() {
-                if !(*r > 0.0 && *r >= range_min && *r <= range_max) {
-                    *r = f32::NAN;
-                }
-            }
-            ScanData::Ranges {
-                angle_min: min32,
-                angle_increment: inc32,
-                range_min,
-                range_max,
-                ranges,
-            }
-        }
-        (None, Some(points)) => {
-            if points.is_empty() {
-                return Err("points is empty".into());
-            }
-            ScanData::Points { points, range_max }
-        }
-    };
-    Ok((data, raw.truth))
-}
-
-/// A JSON value where a number is expected.
-enum Scalar {
-    Num(f64),
-    Null,
-    /// Anything else, as "a string", "an array", ...
-    Other(&'static str),
-}
-
-/// Implements the `visit_*` methods of a `deserialize_any` visitor for the
-/// JSON kinds it does not handle itself, mapping each to `$f(self, kind)`;
-/// arrays and objects are drained first.
-macro_rules! other_kinds {
-    ($f:expr; $($kind:ident),*) => {
-        $(other_kinds!(@one $f; $kind);)*
-    };
-    (@one $f:expr; bool) => {
-        fn visit_bool<E: de::Error>(self, _: bool) -> Result<Self::Value, E> { Ok($f(self, "a boolean")) }
-    };
-    (@one $f:expr; num) => {
-        fn visit_i64<E: de::Error>(self, _: i64) -> Result<Self::Value, E> { Ok($f(self, "a number")) }
-        fn visit_u64<E: de::Error>(self, _: u64) -> Result<Self::Value, E> { Ok($f(self, "a number")) }
-        fn visit_f64<E: de::Error>(self, _: f64) -> Result<Self::Value, E> { Ok($f(self, "a number")) }
-    };
-    (@one $f:expr; str) => {
-        fn visit_str<E: de::Error>(self, _: &str) -> Result<Self::Value, E> { Ok($f(self, "a string")) }
-    };
-    (@one $f:expr; null) => {
-        fn visit_unit<E: de::Error>(self) -> Result<Self::Value, E> { Ok($f(self, "null")) }
-    };
-    (@one $f:expr; seq) => {
-        fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
-            while seq.next_element::<IgnoredAny>()?.is_some() {}
-            Ok($f(self, "an array"))
-        }
-    };
-    (@one $f:expr; map) => {
-        fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
-            while map.next_entry::<IgnoredAny, IgnoredAny>()?.is_some() {}
-            Ok($f(self, "an object"))
-        }
-    };
-}
-
-fn huge_to_inf(v: f64) -> f64 {
-    if v.abs() >= JSON_HUGE {
-        v.signum() * f64::INFINITY
-    } else {
-        v
-    }
-}
-
-impl<'de> de::Deserialize<'de> for Scalar {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V;
-        impl<'de> Visitor<'de> for V {
-            type Value = Scalar;
-            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str("a number or null")
-            }
-            fn visit_i64<E: de::Error>(self, v: i64) -> Result<Scalar, E> {
-                Ok(Scalar::Num(v as f64))
-            }
-            fn visit_u64<E: de::Error>(self, v: u64) -> Result<Scalar, E> {
-                Ok(Scalar::Num(v as f64))
-            }
-            fn visit_f64<E: de::Error>(self, v: f64) -> Result<Scalar, E> {
-                Ok(Scalar::Num(huge_to_inf(v)))
-            }
-            fn visit_unit<E: de::Error>(self) -> Result<Scalar, E> {
-                Ok(Scalar::Null)
-            }
-            other_kinds!(|_, k| Scalar::Other(k); bool, str, seq, map);
-        }
-        d.deserialize_any(V)
-    }
-}
-
-/// The JSON `id`.
-enum IdValue {
-    Text(String),
-    Null,
-    Other(&'static str),
-}
-
-impl<'de> de::Deserialize<'de> for IdValue {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V;
-        impl<'de> Visitor<'de> for V {
-            type Value = IdValue;
-            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str("a string or a number")
-            }
-            fn visit_str<E: de::Error>(self, v: &str) -> Result<IdValue, E> {
-                Ok(IdValue::Text(v.to_owned()))
-            }
-            fn visit_i64<E: de::Error>(self, v: i64) -> Result<IdValue, E> {
-                Ok(IdValue::Text(v.to_string()))
-            }
-            fn visit_u64<E: de::Error>(self, v: u64) -> Result<IdValue, E> {
-                Ok(IdValue::Text(v.to_string()))
-            }
-            fn visit_f64<E: de::Error>(self, v: f64) -> Result<IdValue, E> {
-                Ok(IdValue::Text(v.to_string()))
-            }
-            fn visit_unit<E: de::Error>(self) -> Result<IdValue, E> {
-                Ok(IdValue::Null)
-            }
-            other_kinds!(|_, k| IdValue::Other(k); bool, seq, map);
-        }
-        d.deserialize_any(V)
-    }
-}
-
-/// An element of `points`: `Ok([x, y])` or what it was instead.
-struct PointValue(Result<[f64; 2], &'static str>);
-
-impl<'de> de::Deserialize<'de> for PointValue {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V;
-        impl<'de> Visitor<'de> for V {
-            type Value = PointValue;
-            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str("an [x, y] pair")
-            }
-            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<PointValue, A::Error> {
-                let (v, n) = read_numbers::<A, 2>(&mut seq)?;
-                Ok(PointValue(match v {
-                    _ if n != 2 => Err("an array of length other than 2"),
-                    Some(xy) => Ok(xy),
-                    None => Err("an array with a non-number"),
-                }))
-            }
-            other_kinds!(|_, k| PointValue(Err(k)); bool, num, str, null, map);
-        }
-        d.deserialize_any(V)
-    }
-}
-
-/// Reads the rest of `seq`, returning its first `N` elements if they are
-/// all numbers, and the total element count.
-fn read_numbers<'de, A: SeqAccess<'de>, const N: usize>(
-    seq: &mut A,
-) -> Result<(Option<[f64; N]>, usize), A::Error> {
-    let mut out = [0.0; N];
-    let mut all_numbers = true;
-    let mut n = 0usize;
-    while n < N {
-        match seq.next_element::<Scalar>()? {
-            Some(Scalar::Num(v)) => out[n] = v,
-            Some(_) => all_numbers = false,
-            None => break,
-        }
-        n += 1;
-    }
-    if n == N {
-        while seq.next_element::<IgnoredAny>()?.is_some() {
-            n = n.saturating_add(1);
-        }
-    }
-    Ok((all_numbers.then_some(out), n))
-}
-
-/// The JSON `truth`.
-enum TruthValue {
-    Pose([f64; 3]),
-    Null,
-    Bad(&'static str),
-}
-
-impl<'de> de::Deserialize<'de> for TruthValue {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V;
-        impl<'de> Visitor<'de> for V {
-            type Value = TruthValue;
-            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str("[x, y, theta]")
-            }
-            fn visit_unit<E: de::Error>(self) -> Result<TruthValue, E> {
-                Ok(TruthValue::Null)
-            }
-            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<TruthValue, A::Error> {
-                let (v, n) = read_numbers::<A, 3>(&mut seq)?;
-                Ok(match v {
-                    _ if n != 3 => TruthValue::Bad("an array of length other than 3"),
-                    Some(p) => TruthValue::Pose(p),
-                    None => TruthValue::Bad("an array with a non-number"),
-                })
-            }
-            other_kinds!(|_, k| TruthValue::Bad(k); bool, num, str, map);
-        }
-        d.deserialize_any(V)
-    }
-}
-
-/// Reads `ranges` (at most `max_beams` kept) or `points` into the record.
-struct ListSeed<'a> {
-    raw: &'a mut RawRecord,
-    max_beams: usize,
-    points: bool,
-}
-
-impl ListSeed<'_> {
-    fn name(&self) -> &'static str {
-        if self.points {
-            "points"
-        } else {
-            "ranges"
-        }
-    }
-
-    fn not_a_list(self, kind: &str) {
-        let msg = if self.points {
-            format!("points is {kind}, expected an array of [x, y] pairs")
-        } else {
-            format!("ranges is {kind}, expected an array of numbers or null")
-        };
-        self.raw.problem(msg);
-    }
-}
-
-impl<'de> DeserializeSeed<'de> for ListSeed<'_> {
-    type Value = ();
-    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
-        d.deserialize_any(self)
-    }
-}
-
-impl<'de> Visitor<'de> for ListSeed<'_> {
-    type Value = ();
-
-    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "an array ({})", self.name())
-    }
-
-    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
-        let mut count = 0usize;
-        let mut problem: Option<String> = None;
-        if self.points {
-            let mut points = Vec::new();
-            while count < self.max_beams {
-                let Some(PointValue(p)) = seq.next_element::<PointValue>()? else {
-                    break;
-                };
-                match p {
-                    Ok([x, y]) if (x as f32).is_finite() && (y as f32).is_finite() => {
-                        points.push([x as f32, y as f32]);
-                    }
-                    Ok(_) => {
-                        problem.get_or_insert_with(|| format!("points[{count}] is not finite"));
-                    }
-                    Err(kind) => {
-                        problem.get_or_insert_with(|| {
-                            format!("points[{count}] is {kind}, expected an [x, y] pair of numbers")
-                        });
-                    }
-                }
-                count += 1;
-            }
-            self.raw.points = Some(points);
-        } else {
-            let mut ranges = Vec::new();
-            while count < self.max_beams {
-                match seq.next_element::<Scalar>()? {
-                    None => break,
-                    Some(Scalar::Num(v)) => ranges.push(v as f32),
-                    Some(Scalar::Null) => ranges.push(f32::NAN),
-                    Some(Scalar::Other(kind)) => {
-                        problem.get_or_insert_with(|| {
-                            format!("ranges[{count}] is {kind}, expected a number or null")
-                        });
-                    }
-                }
-                count += 1;
-            }
-            self.raw.ranges = Some(ranges);
-        }
-        let mut total = count;
-        while seq.next_element::<IgnoredAny>()?.is_some() {
-            total = total.saturating_add(1);
-        }
-        if total > self.max_beams {
-            self.raw.problem(format!(
-                "{} has {total} entries, more than max_beams = {}",
-                self.name(),
-                self.max_beams
-            ));
-        }
-        if let Some(p) = problem {
-            self.raw.problem(p);
-        }
-        Ok(())
-    }
-
-    other_kinds!(ListSeed::not_a_list; bool, num, str, null, map);
-}
-
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Field {
-    Id,
-    AngleMin,
-    AngleMax,
-    AngleIncrement,
-    RangeMin,
-    RangeMax,
-    Ranges,
-    Points,
-    Truth,
-    Other,
-}
-
-impl Field {
-    fn name(self) -> &'static str {
-        match self {
-            Field::Id => "id",
-            Field::AngleMin => "angle_min",
-            Field::AngleMax => "angle_max",
-            Field::AngleIncrement => "angle_increment",
-            Field::RangeMin => "range_min",
-            Field::RangeMax => "range_max",
-            Field::Ranges => "ranges",
-            Field::Points => "points",
-            Field::Truth => "truth",
-            Field::Other => "?",
-        }
-    }
-}
-
-impl<'de> de::Deserialize<'de> for Field {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V;
-        impl Visitor<'_> for V {
-            type Value = Field;
-            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str("a field name")
-            }
-            fn visit_str<E: de::Error>(self, v: &str) -> Result<Field, E> {
-                Ok(match v {
-                    "id" => Field::Id,
-                    "angle_min" => Field::AngleMin,
-                    "angle_max" => Field::AngleMax,
-                    "angle_increment" => Field::AngleIncrement,
-                    "range_min" => Field::RangeMin,
-                    "range_max" => Field::RangeMax,
-                    "ranges" => Field::Ranges,
-                    "points" => Field::Points,
-                    "truth" => Field::Truth,
-                    _ => Field::Other,
-                })
-            }
-        }
-        d.deserialize_str(V)
-    }
-}
-
-/// Reads one JSON object into a [`RawRecord`], recording the first problem
-/// with a field instead of failing, so that the message can name the field.
-struct RecordSeed<'a> {
-    raw: &'a mut RawRecord,
-    max_beams: usize,
-}
-
-impl<'de> DeserializeSeed<'de> for RecordSeed<'_> {
-    type Value = ();
-    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
-        d.deserialize_map(self)
-    }
-}
-
-impl<'de> Visitor<'de> for RecordSeed<'_> {
-    type Value = ();
-
-    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str("a JSON object (one scan per line)")
-    }
-
-    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
-        let raw = self.raw;
-        let mut seen = 0u32;
-        while let Some(field) = map.next_key::<Field>()? {
-            if field == Field::Other {
-                map.next_value::<IgnoredAny>()?;
-                continue;
-            }
-            let bit = 1u32 << (field as u32);
-            if seen & bit != 0 {
-                raw.problem(format!("field {} appears more than once", field.name()));
-                map.next_value::<IgnoredAny>()?;
-                continue;
-            }
-            seen |= bit;
-            match field {
-                Field::Id => match map.next_value::<IdValue>()? {
-                    IdValue::Text(s) if s.len() > MAX_ID_BYTES => {
-                        raw.problem(format!(
-                            "id is {} bytes long, more than {MAX_ID_BYTES}",
-                            s.len()
-                        ));
-                    }
-                    IdValue::Text(s) if s.chars().any(char::is_control) => {
-                        raw.problem("id contains a control character".into());
-                    }
-                    IdValue::Text(s) => raw.id = Some(s),
-                    IdValue::Null => {}
-                    IdValue::Other(kind) => {
-                        raw.problem(format!("id is {kind}, expected a string or a number"))
-                    }
-                },
-                Field::Ranges | Field::Points => {
-                    let points = field == Field::Points;
-                    map.next_value_seed(ListSeed {
-                        raw: &mut *raw,
-                        max_beams: self.max_beams,
-                        points,
-                    })?;
-                }
-                Field::Truth => match map.next_value::<TruthValue>()? {
-                    TruthValue::Pose(p) if p.iter().all(|v| v.is_finite()) => raw.truth = Some(p),
-                    TruthValue::Pose(_) => raw.problem("truth is not finite".into()),
-                    TruthValue::Null => {}
-                    TruthValue::Bad(kind) => {
-                        raw.problem(format!(
-                            "truth is {kind}, expected [x, y, theta] (metres, radians)"
-                        ));
-                    }
-                },
-                _ => {
-                    let value = match map.next_value::<Scalar>()? {
-                        Scalar::Num(v) => Some(v),
-                        Scalar::Null
-                            if matches!(field, Field::AngleMin | Field::AngleIncrement) =>
-                        {
-                            raw.problem(format!("{} is null, expected a number", field.name()));
-                            None
-                        }
-                        Scalar::Null => None,
-                        Scalar::Other(kind) => {
-                            raw.problem(format!("{} is {kind}, expected a number", field.name()));
-                            None
-                        }
-                    };
-                    let slot = match field {
-                        Field::AngleMin => &mut raw.angle_min,
-                        Field::AngleMax => &mut raw.angle_max,
-                        Field::AngleIncrement => &mut raw.angle_increment,
-                        Field::RangeMin => &mut raw.range_min,
-                        _ => &mut raw.range_max,
-                    };
-                    *slot = value;
-                }
-            }
-        }
-        Ok(())
-    }
 }
 
 // ---------------------------------------------------------------------------
@@ -1514,14 +831,10 @@ impl CarmenState {
             if is_keyword(kw) {
                 return None;
             }
-            let message = format!(
-                "not a CARMEN line: {} is not an uppercase keyword such as FLASER",
-                show(kw)
-            );
             return Some(Err(ScanError {
                 id: None,
                 line,
-                message,
+                kind: ScanErrorKind::NotCarmen(show(kw)),
             }));
         };
         let id = format!("scan {}", self.scans);
@@ -1540,10 +853,10 @@ impl CarmenState {
                 truth: Some(pose),
                 stamp: None,
             }),
-            Err(message) => Err(ScanError {
+            Err(kind) => Err(ScanError {
                 id: Some(id),
                 line,
-                message,
+                kind,
             }),
         })
     }
@@ -1570,20 +883,20 @@ fn parse_count(
     name: &str,
     what: &str,
     max: Option<usize>,
-) -> Result<usize, String> {
-    let t = t.ok_or_else(|| format!("{name} line ends before its {what}"))?;
+) -> Result<usize, ScanErrorKind> {
+    let t = t.ok_or_else(|| invalid(format!("{name} line ends before its {what}")))?;
     let digits = match t {
         [b'-', rest @ ..] if !rest.is_empty() && rest.iter().all(u8::is_ascii_digit) => {
-            return Err(format!("{name} {what} {} is negative", show(t)));
+            return Err(invalid(format!("{name} {what} {} is negative", show(t))));
         }
         [b'+', rest @ ..] => rest,
         _ => t,
     };
     if digits.is_empty() || !digits.iter().all(u8::is_ascii_digit) {
-        return Err(format!(
+        return Err(invalid(format!(
             "{name} {what} {} is not a non-negative integer",
             show(t)
-        ));
+        )));
     }
     let n = digits.iter().try_fold(0usize, |n, &d| {
         n.checked_mul(10)?.checked_add(usize::from(d - b'0'))
@@ -1592,12 +905,12 @@ fn parse_count(
     if let Some(max) = max {
         if n > max {
             let shown = String::from_utf8_lossy(&digits[..digits.len().min(40)]).into_owned();
-            return Err(format!(
+            return Err(invalid(format!(
                 "{name} has {shown} beams, more than max_beams = {max}"
-            ));
+            )));
         }
         if n == 0 {
-            return Err(format!("{name} has 0 beams"));
+            return Err(invalid(format!("{name} has 0 beams")));
         }
     }
     Ok(n)
@@ -1607,13 +920,16 @@ fn parse_number<'a>(
     it: &mut impl Iterator<Item = &'a [u8]>,
     name: &str,
     what: &str,
-) -> Result<f64, String> {
+) -> Result<f64, ScanErrorKind> {
     let t = it
         .next()
-        .ok_or_else(|| format!("{name} line ends before its {what}"))?;
+        .ok_or_else(|| invalid(format!("{name} line ends before its {what}")))?;
     match parse_f64(Some(t)) {
         Some(v) if v.is_finite() => Ok(v),
-        _ => Err(format!("{name} {what} {} is not a finite number", show(t))),
+        _ => Err(invalid(format!(
+            "{name} {what} {} is not a finite number",
+            show(t)
+        ))),
     }
 }
 
@@ -1624,14 +940,14 @@ fn parse_ranges<'a>(
     n: usize,
     max: f32,
     name: &str,
-) -> Result<Vec<f32>, String> {
+) -> Result<Vec<f32>, ScanErrorKind> {
     let mut ranges = Vec::with_capacity(n);
     for i in 0..n {
         let t = it
             .next()
-            .ok_or_else(|| format!("{name} line ends before range {i}"))?;
+            .ok_or_else(|| invalid(format!("{name} line ends before range {i}")))?;
         let r = parse_f64(Some(t))
-            .ok_or_else(|| format!("{name} range {i} ({}) is not a number", show(t)))?;
+            .ok_or_else(|| invalid(format!("{name} range {i} ({}) is not a number", show(t))))?;
         let r32 = r as f32;
         ranges.push(if r32.is_finite() && r32 > 0.0 && r32 < max {
             r32
@@ -1646,7 +962,7 @@ fn parse_pose<'a>(
     it: &mut impl Iterator<Item = &'a [u8]>,
     name: &str,
     what: &str,
-) -> Result<[f64; 3], String> {
+) -> Result<[f64; 3], ScanErrorKind> {
     Ok([
         parse_number(it, name, &format!("{what} x"))?,
         parse_number(it, name, &format!("{what} y"))?,
@@ -1665,25 +981,25 @@ fn parse_old_laser(
     rear: bool,
     param_max: Option<f32>,
     opts: &ReadOptions,
-) -> Result<(ScanData, [f64; 3]), String> {
+) -> Result<(ScanData, [f64; 3]), ScanErrorKind> {
     let total = tokens(text).count();
     let mut it = tokens(text).skip(1);
     let n = parse_count(it.next(), name, "beam count", Some(opts.max_beams))?;
     let after = total - 2;
     let (lo, hi) = (n.saturating_add(6), n.saturating_add(9));
     if after < lo || after > hi {
-        return Err(format!(
+        return Err(invalid(format!(
             "{name} says n = {n} beams but {after} fields follow the count; expected {lo} to {hi} \
              (n ranges, laser pose, odometry pose, timestamps and host)"
-        ));
+        )));
     }
     let fov = match opts.fov {
         None => PI,
         Some(f) if f.is_finite() && f > 0.0 && f as f64 <= ANGLE_LIMIT => f as f64,
         Some(f) => {
-            return Err(format!(
+            return Err(invalid(format!(
                 "the field of view override ({f} rad) is not in (0, 2 pi]"
-            ))
+            )))
         }
     };
     let inc = carmen_angle_increment(n, fov);
@@ -1716,12 +1032,12 @@ fn parse_robot_laser(
     text: &[u8],
     name: &str,
     opts: &ReadOptions,
-) -> Result<(ScanData, [f64; 3]), String> {
+) -> Result<(ScanData, [f64; 3]), ScanErrorKind> {
     let total = tokens(text).count();
     let mut it = tokens(text).skip(1);
     let _laser_type = it
         .next()
-        .ok_or_else(|| format!("{name} line ends before its laser_type"))?;
+        .ok_or_else(|| invalid(format!("{name} line ends before its laser_type")))?;
     let start = parse_number(&mut it, name, "start_angle")?;
     let _fov = parse_number(&mut it, name, "field_of_view")?;
     let inc = parse_number(&mut it, name, "angular_resolution")?;
@@ -1729,14 +1045,14 @@ fn parse_robot_laser(
     let _accuracy = parse_number(&mut it, name, "accuracy")?;
     let _remission_mode = it
         .next()
-        .ok_or_else(|| format!("{name} line ends before its remission_mode"))?;
+        .ok_or_else(|| invalid(format!("{name} line ends before its remission_mode")))?;
     let n = parse_count(it.next(), name, "num_readings", Some(opts.max_beams))?;
     let after = total - 9;
     if after <= n {
-        return Err(format!(
+        return Err(invalid(format!(
             "{name} says num_readings = {n} but only {after} fields follow; expected at least {}",
             n.saturating_add(7)
-        ));
+        )));
     }
     let (start, inc) = stored_angles(
         start,
@@ -1756,12 +1072,12 @@ fn parse_robot_laser(
     let k = parse_count(it.next(), name, "num_remissions", None)?;
     let rest = after - n - 1;
     if k > rest || rest - k < 6 || rest - k > 14 {
-        return Err(format!(
+        return Err(invalid(format!(
             "{name} says num_remissions = {k} but {rest} fields follow it; expected {} to {} \
              (remissions, laser pose, robot pose, velocities, timestamps and host)",
             k.saturating_add(6),
             k.saturating_add(14)
-        ));
+        )));
     }
     for _ in 0..k {
         it.next();

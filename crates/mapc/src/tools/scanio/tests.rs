@@ -166,7 +166,7 @@ fn io_error_ends_the_stream_with_one_error() {
     let e = items[1].as_ref().unwrap_err();
     assert_eq!(e.line, 2);
     assert!(
-        e.message.contains("read error") && e.message.contains("disk on fire"),
+        e.message().contains("read error") && e.message().contains("disk on fire"),
         "{e}"
     );
 }
@@ -415,9 +415,9 @@ fn json_errors_name_the_field() {
         assert_eq!(e.line, 1);
         for w in *words {
             assert!(
-                e.message.contains(w),
+                e.message().contains(w),
                 "case {k}: {line}: message {:?} lacks {w:?}",
-                e.message
+                e.message()
             );
         }
         assert!(v[1].is_ok(), "case {k}");
@@ -448,7 +448,10 @@ fn json_invalid_utf8_and_long_id() {
     line.extend_from_slice(br#"","points":[[1,2]]}"#);
     let v = read_all(&line, InputFormat::Auto, &ReadOptions::default());
     assert!(
-        v[0].as_ref().unwrap_err().message.contains("invalid JSON"),
+        v[0].as_ref()
+            .unwrap_err()
+            .message()
+            .contains("invalid JSON"),
         "{v:?}"
     );
     let v = read(
@@ -458,7 +461,7 @@ fn json_invalid_utf8_and_long_id() {
     assert!(
         v[0].as_ref()
             .unwrap_err()
-            .message
+            .message()
             .contains("id is 300 bytes long"),
         "{v:?}"
     );
@@ -481,7 +484,7 @@ fn json_angle_max_is_loose() {
         r#"{"angle_min":0,"angle_increment":0.1,"angle_max":0.31,"ranges":[1,2,3]}"#,
         InputFormat::Auto,
     );
-    assert!(e.message.contains("angle_max"), "{e}");
+    assert!(e.message().contains("angle_max"), "{e}");
 }
 
 #[test]
@@ -502,7 +505,7 @@ fn json_max_beams() {
         &opts,
     );
     assert_eq!(
-        v[0].as_ref().unwrap_err().message,
+        v[0].as_ref().unwrap_err().message(),
         "ranges has 5 entries, more than max_beams = 3"
     );
     let v = read_all(
@@ -511,7 +514,7 @@ fn json_max_beams() {
         &opts,
     );
     assert_eq!(
-        v[0].as_ref().unwrap_err().message,
+        v[0].as_ref().unwrap_err().message(),
         "points has 4 entries, more than max_beams = 3"
     );
 }
@@ -544,12 +547,46 @@ fn json_deep_nesting_never_crashes() {
 }
 
 #[test]
-fn clamp_rewrites_only_overflowing_numbers() {
-    assert_eq!(clamp_overflowing_numbers(br#"[1, 2e5, "1e400"]"#), None);
-    assert_eq!(
-        clamp_overflowing_numbers(br#"{"a\"1e999":[1e400,-2E+999,3.5,"x\\"],"b":1e999}"#).unwrap(),
-        br#"{"a\"1e999":[1e308,-1e308,3.5,"x\\"],"b":1e308}"#.to_vec()
+fn numbers_beyond_f64_range_read_as_infinite() {
+    // By the number type, not by serde_json's error: outside strings only.
+    let s = one(
+        r#"{"a\"1e999":"1e400","angle_min":0,"angle_increment":0.5,"ranges":[1e400,-2E+999,3.5,1.7e308,1e307]}"#,
+        InputFormat::JsonLines,
+    )
+    .unwrap();
+    assert!(same(
+        ranges_of(&s).4,
+        &[f32::NAN, f32::NAN, 3.5, f32::NAN, f32::NAN]
+    ));
+    let e = err(
+        r#"{"angle_min":0,"angle_increment":0.5,"ranges":[1],"range_max":1e999}"#,
+        InputFormat::JsonLines,
     );
+    assert_eq!(
+        e.message(),
+        "range_max (inf) is not a positive finite number of metres"
+    );
+    let e = err(
+        r#"{"angle_min":0,"angle_increment":1.5e308,"ranges":[1]}"#,
+        InputFormat::JsonLines,
+    );
+    assert_eq!(e.kind, ScanErrorKind::NotFinite("angle_increment".into()));
+    // A numeric id keeps the text it had: huge ones are clamped to 1e308.
+    let e = err(r#"{"id":1e400,"points":[[1,2]]}"#, InputFormat::JsonLines);
+    assert_eq!(e.kind, ScanErrorKind::IdTooLong(309));
+    for (id, text) in [
+        ("-0", "-0"),
+        ("-5", "-5"),
+        ("1e2", "100"),
+        ("18446744073709551616", "18446744073709552000"),
+    ] {
+        let s = one(
+            &format!(r#"{{"id":{id},"points":[[1,2]]}}"#),
+            InputFormat::JsonLines,
+        )
+        .unwrap();
+        assert_eq!(s.id, text);
+    }
 }
 
 // ---------------------------------------------------------------------------
@@ -562,10 +599,14 @@ fn auto_sniffs_and_reports_undecidable_lines() {
     assert_eq!(v.len(), 3, "{v:?}");
     let e = v[0].as_ref().unwrap_err();
     assert_eq!(e.line, 2);
-    assert!(e.message.contains("cannot tell the input format"), "{e}");
+    assert!(e.message().contains("cannot tell the input format"), "{e}");
     assert!(v[1].is_ok());
     // Once JSON, a CARMEN line is a JSON error.
-    assert!(v[2].as_ref().unwrap_err().message.contains("invalid JSON"));
+    assert!(v[2]
+        .as_ref()
+        .unwrap_err()
+        .message()
+        .contains("invalid JSON"));
 
     let v = read(
         "\u{feff}PARAM x 1\nFLASER 1 1 0 0 0 0 0 0\n{\"points\":[[1,2]]}\n",
@@ -576,7 +617,7 @@ fn auto_sniffs_and_reports_undecidable_lines() {
     assert!(v[1]
         .as_ref()
         .unwrap_err()
-        .message
+        .message()
         .contains("not a CARMEN line"));
 }
 
@@ -657,7 +698,10 @@ fn carmen_fov_override_and_rear_laser() {
             &opts,
         );
         assert!(
-            v[0].as_ref().unwrap_err().message.contains("field of view"),
+            v[0].as_ref()
+                .unwrap_err()
+                .message()
+                .contains("field of view"),
             "{v:?}"
         );
     }
@@ -801,9 +845,9 @@ fn carmen_errors() {
         assert_eq!((e.line, e.id.as_deref()), (2, Some("scan 0")), "case {k}");
         for w in *words {
             assert!(
-                e.message.contains(w),
+                e.message().contains(w),
                 "case {k}: {line}: message {:?} lacks {w:?}",
-                e.message
+                e.message()
             );
         }
         // The failed line still counts as a laser line.
@@ -820,7 +864,7 @@ fn carmen_skips_other_lines_and_reports_garbage() {
     assert_eq!(v.len(), 2, "{v:?}");
     let e = v[0].as_ref().unwrap_err();
     assert_eq!((e.line, e.id.as_deref()), (7, None));
-    assert!(e.message.contains("not a CARMEN line"), "{e}");
+    assert!(e.message().contains("not a CARMEN line"), "{e}");
     assert_eq!(v[1].as_ref().unwrap().line, 8);
 }
 
@@ -840,7 +884,7 @@ fn too_long_lines_are_errors_and_counted() {
     assert_eq!(v.len(), 2, "{v:?}");
     let e = v[0].as_ref().unwrap_err();
     assert_eq!(e.id.as_deref(), Some("scan 0"));
-    assert!(e.message.contains(&format!(
+    assert!(e.message().contains(&format!(
         "line is {} bytes long, more than max_line_bytes = 200",
         long.len()
     )));
@@ -940,7 +984,7 @@ fn random_garbage_never_panics() {
                             assert!(angle_increment.is_finite() && angle_increment != 0.0);
                         }
                     }
-                    Err(e) => assert!(!e.message.is_empty()),
+                    Err(e) => assert!(!e.message().is_empty()),
                 }
             }
         }
@@ -986,6 +1030,37 @@ fn scan_to_json_round_trips_ranges() {
     assert!(v["ranges"][3].is_null());
 }
 
+/// The exact text `scan_to_json` writes (as the hand-written writer before
+/// serde_json did): floats as `{:?}` (`1e16`, `3e-6`, `-0.0`), `null` for
+/// values that are not finite, control characters as `\u00XX` except
+/// `\n`, `\r`, `\t`.
+#[test]
+fn scan_to_json_text_is_fixed() {
+    let d = ScanData::Ranges {
+        angle_min: -0.0,
+        angle_increment: 1e-7,
+        range_min: 1e16,
+        range_max: f32::MAX,
+        ranges: vec![f32::NAN, 1.0, 0.1, f32::INFINITY, 3e-6],
+    };
+    assert_eq!(
+        scan_to_json(
+            &d,
+            "a\u{8}\u{c}\u{7f}\"\\\n\u{1}é",
+            Some([1.0, -0.0, f64::NAN])
+        ),
+        r#"{"id":"a\u0008\u000c\u007f\"\\\n\u0001é","angle_min":-0.0,"angle_max":4e-7,"angle_increment":1e-7,"range_min":1e16,"range_max":3.4028235e38,"ranges":[null,1.0,0.1,null,3e-6],"truth":[1.0,-0.0,null]}"#
+    );
+    let d = ScanData::Points {
+        points: vec![[1e-45, -1e38], [2.5, 0.0]],
+        range_max: 30.0,
+    };
+    assert_eq!(
+        scan_to_json(&d, "p", None),
+        r#"{"id":"p","range_max":30.0,"points":[[1e-45,-1e38],[2.5,0.0]]}"#
+    );
+}
+
 /// The angle limits hold for the f32 values a scan keeps, not only for the
 /// f64 values read (fuzz findings `angle-min-f32-rounds-past-limit` and
 /// `increment-f32-rounds-past-full-turn`): every record accepted near a
@@ -1007,9 +1082,9 @@ fn angles_are_checked_as_stored_f32() {
     };
     // angle_min: 6.2841853 is inside 2 pi + 1e-3 in f64, its f32 is not.
     let e = err(&record("6.2841853", "1", 1), InputFormat::JsonLines);
-    assert!(e.message.starts_with("angle_min (6.2841854)"), "{e}");
+    assert!(e.message().starts_with("angle_min (6.2841854)"), "{e}");
     let e = err(&record("-6.2841853", "1", 1), InputFormat::JsonLines);
-    assert!(e.message.starts_with("angle_min"), "{e}");
+    assert!(e.message().starts_with("angle_min"), "{e}");
     // The largest f32 inside the limit is accepted and reads back.
     let limit = std::f64::consts::TAU + 1e-3;
     let mut inside = limit as f32;
@@ -1032,7 +1107,7 @@ fn angles_are_checked_as_stored_f32() {
         &record("0", "2.0946048752367683", 4),
         InputFormat::JsonLines,
     );
-    assert!(e.message.contains("more than a full turn"), "{e}");
+    assert!(e.message().contains("more than a full turn"), "{e}");
     let (mut accepted, mut rejected) = (0, 0);
     for k in -40..40 {
         let inc = 2.0946048752367683 + k as f64 * 3e-8;
@@ -1046,7 +1121,7 @@ fn angles_are_checked_as_stored_f32() {
                     accepted += 1;
                 }
                 Err(e) => {
-                    assert!(e.message.contains("more than a full turn"), "{e}");
+                    assert!(e.message().contains("more than a full turn"), "{e}");
                     rejected += 1;
                 }
             }
@@ -1056,18 +1131,21 @@ fn angles_are_checked_as_stored_f32() {
     // An increment that is 0 or infinite as f32 is rejected, not stored.
     for inc in ["1e-50", "-1e-46"] {
         let e = err(&record("0", inc, 2), InputFormat::JsonLines);
-        assert!(e.message.contains("32-bit float (rounds to"), "{inc}: {e}");
+        assert!(
+            e.message().contains("32-bit float (rounds to"),
+            "{inc}: {e}"
+        );
     }
     let e = err(&record("0", "1e300", 1), InputFormat::JsonLines);
-    assert!(e.message.contains("32-bit float (rounds to inf)"), "{e}");
+    assert!(e.message().contains("32-bit float (rounds to inf)"), "{e}");
     // ROBOTLASER1: the same checks on start_angle / angular_resolution.
     let robot = |start: &str, inc: &str| {
         format!("ROBOTLASER1 0 {start} 3.14 {inc} 30 0.01 0 2 1 1 0 0 0 0 0 0 0 0 0 0 0 0 1 h 2")
     };
     let e = err(&robot("6.2841853", "0.01"), InputFormat::Carmen);
-    assert!(e.message.contains("start_angle (6.2841854)"), "{e}");
+    assert!(e.message().contains("start_angle (6.2841854)"), "{e}");
     let e = err(&robot("0", "1e-50"), InputFormat::Carmen);
-    assert!(e.message.contains("angular_resolution"), "{e}");
+    assert!(e.message().contains("angular_resolution"), "{e}");
     round_trips(&one(&robot("-1.57", "0.01"), InputFormat::Carmen).unwrap());
     // FLASER with a field of view override just over a turn (allowed up to
     // 2 pi + 1e-3): the beams would span more than the reader accepts back.
@@ -1081,7 +1159,7 @@ fn angles_are_checked_as_stored_f32() {
         &opts,
     );
     let e = v[0].as_ref().unwrap_err();
-    assert!(e.message.contains("more than a full turn"), "{e}");
+    assert!(e.message().contains("more than a full turn"), "{e}");
     let opts = ReadOptions {
         fov: Some(std::f32::consts::TAU),
         ..ReadOptions::default()
@@ -1153,7 +1231,7 @@ fn open_input_plain_gzip_and_magic() {
         let r = open_input(path.to_str().unwrap()).unwrap();
         let v: Vec<_> = read_scans(r, InputFormat::Auto, &ReadOptions::default()).collect();
         let last = v.last().unwrap().as_ref().unwrap_err();
-        assert!(last.message.contains("read error"), "{last}");
+        assert!(last.message().contains("read error"), "{last}");
     }
     assert!(open_input(dir.path().join("missing").to_str().unwrap()).is_err());
     // Empty and one-byte files.
