@@ -2,6 +2,7 @@
 //! stage. Nothing here uses [`crate::tools`].
 
 pub mod compile;
+pub mod connectivity;
 pub mod edt;
 pub mod error;
 pub mod fit;

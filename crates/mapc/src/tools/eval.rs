@@ -22,6 +22,7 @@ use refloc::ssm::{self, SsmWork, DESC_LEN};
 use refloc::{prep, scratch_size, MapFrame, Pose2, RangeScan, RefDb, Scan};
 use serde::{Deserialize, Serialize};
 
+use crate::compiler::connectivity::flood4;
 use crate::compiler::rng::Rng;
 use crate::compiler::sim::{self, Lidar, Noise};
 
@@ -291,36 +292,27 @@ fn largest_region(cells: &[u32], w: u32, h: u32) -> Vec<u32> {
     }
     let mut best = (0u32, 0usize);
     let mut next = 1u32;
-    let mut stack = Vec::new();
+    let mut stack: Vec<u32> = Vec::new();
     for &c in cells {
         if label[c as usize] != u32::MAX {
             continue;
         }
         let mut size = 0;
         label[c as usize] = next;
-        stack.push(c as usize);
-        while let Some(i) = stack.pop() {
-            size += 1;
-            let (x, y) = (i % w as usize, i / w as usize);
-            let mut push = |j: usize| {
-                if label[j] == u32::MAX {
+        flood4(
+            w as usize,
+            h as usize,
+            c as usize,
+            &mut stack,
+            |j| {
+                let take = label[j] == u32::MAX;
+                if take {
                     label[j] = next;
-                    stack.push(j);
                 }
-            };
-            if x > 0 {
-                push(i - 1);
-            }
-            if x + 1 < w as usize {
-                push(i + 1);
-            }
-            if y > 0 {
-                push(i - w as usize);
-            }
-            if y + 1 < h as usize {
-                push(i + w as usize);
-            }
-        }
+                take
+            },
+            |_| size += 1,
+        );
         if size > best.1 {
             best = (next, size);
         }

@@ -56,6 +56,7 @@ use std::collections::{HashMap, HashSet};
 
 use rayon::prelude::*;
 
+use crate::compiler::connectivity::{flood4, UnionFind};
 use crate::compiler::edt::{DistanceField, NONE};
 use crate::compiler::mapfile::OccupancyGrid;
 
@@ -470,34 +471,25 @@ fn fill_empty_holes(mask: &mut [u8], dist: &DistanceField, w: usize, h: usize) {
         // Flood this component of free non-candidate cells.
         let mut touches_obstacle = false;
         comp.clear();
-        stack.push(start as u32);
         mask[start] = SEEN;
-        while let Some(i) = stack.pop() {
-            let i = i as usize;
-            comp.push(i as u32);
-            let (x, y) = (i % w, i / w);
-            let mut visit = |j: usize| {
+        flood4(
+            w,
+            h,
+            start,
+            &mut stack,
+            |j| {
                 if dist.is_obstacle(j) {
                     touches_obstacle = true;
+                    false
                 } else if mask[j] == 0 {
                     mask[j] = SEEN;
-                    stack.push(j as u32);
+                    true
+                } else {
+                    false
                 }
-            };
-            // Free cells are never on the border ring, but stay in bounds.
-            if x + 1 < w {
-                visit(i + 1);
-            }
-            if x > 0 {
-                visit(i - 1);
-            }
-            if y + 1 < h {
-                visit(i + w);
-            }
-            if y > 0 {
-                visit(i - w);
-            }
-        }
+            },
+            |i| comp.push(i as u32),
+        );
         if !touches_obstacle {
             for &i in &comp {
                 mask[i as usize] = 1;
@@ -887,25 +879,15 @@ impl Skeleton {
     ) -> bool {
         let res = fields.gvd.resolution;
         let n = g.nodes.len();
-        let mut parent: Vec<usize> = (0..n).collect();
-        fn find(p: &mut [usize], mut x: usize) -> usize {
-            while p[x] != x {
-                p[x] = p[p[x]];
-                x = p[x];
-            }
-            x
-        }
+        let mut sets = UnionFind::new(n);
         for e in &g.edges {
-            let (ra, rb) = (find(&mut parent, e.a), find(&mut parent, e.b));
-            if ra != rb {
-                parent[ra.max(rb)] = ra.min(rb);
-            }
+            sets.union(e.a, e.b);
         }
         let mut len = vec![0.0f64; n];
         let mut cells = vec![0usize; n];
         let mut low = vec![0usize; n];
         for e in &g.edges {
-            let r = find(&mut parent, e.a);
+            let r = sets.find(e.a);
             len[r] += path_length(&e.path, self.w) * res;
             cells[r] += e.path.len();
             low[r] += fields.low_count(&e.path);
@@ -913,7 +895,7 @@ impl Skeleton {
         let mut removed = false;
         let small: Vec<bool> = (0..n)
             .map(|v| {
-                let r = find(&mut parent, v);
+                let r = sets.find(v);
                 len[r] < min_len_m || 2 * low[r] > cells[r]
             })
             .collect();

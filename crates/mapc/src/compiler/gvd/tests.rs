@@ -31,25 +31,16 @@ fn gvd(g: &OccupancyGrid, opts: &GvdOptions) -> GvdGraph {
 /// Cyclomatic number: independent cycles of the graph.
 fn cycles(g: &GvdGraph) -> usize {
     let n = g.nodes.len();
-    let mut parent: Vec<usize> = (0..n).collect();
-    fn find(p: &mut [usize], mut x: usize) -> usize {
-        while p[x] != x {
-            x = p[x];
-        }
-        x
-    }
-    let mut comps = n;
+    g.edges.len() + components(g) - n
+}
+
+/// Connected components of a GVD graph.
+fn components(g: &GvdGraph) -> usize {
+    let mut sets = crate::compiler::connectivity::UnionFind::new(g.nodes.len());
     for e in &g.edges {
-        let (a, b) = (
-            find(&mut parent, e.a as usize),
-            find(&mut parent, e.b as usize),
-        );
-        if a != b {
-            parent[a] = b;
-            comps -= 1;
-        }
+        sets.union(e.a as usize, e.b as usize);
     }
-    g.edges.len() + comps - n
+    sets.count()
 }
 
 fn check_consistent(g: &GvdGraph) {
@@ -180,25 +171,7 @@ fn narrow_door_breaks_the_gvd_at_robot_radius() {
         let r = gvd(&g, &GvdOptions::default());
         dump(&format!("door{door}"), &g, &r);
         check_consistent(&r);
-        let n = r.nodes.len();
-        let mut parent: Vec<usize> = (0..n).collect();
-        fn find(p: &mut [usize], mut x: usize) -> usize {
-            while p[x] != x {
-                x = p[x];
-            }
-            x
-        }
-        let mut comps = n;
-        for e in &r.edges {
-            let (a, b) = (
-                find(&mut parent, e.a as usize),
-                find(&mut parent, e.b as usize),
-            );
-            if a != b {
-                parent[a] = b;
-                comps -= 1;
-            }
-        }
+        let comps = components(&r);
         assert_eq!(comps, pieces, "door {door}: {:?}", r.nodes);
         // Nothing closer to a wall than the robot radius.
         let d = distance_field(&g, &GvdOptions::default());

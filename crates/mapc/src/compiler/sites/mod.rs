@@ -30,6 +30,7 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use rayon::prelude::*;
 use refloc::raycast::{traverse, BitGrid, Occupancy};
 
+use crate::compiler::connectivity::flood4;
 use crate::compiler::edt::DistanceField;
 use crate::compiler::gvd::GvdGraph;
 use crate::compiler::mapfile::{Cell, OccupancyGrid};
@@ -421,30 +422,18 @@ pub fn largest_free_region(grid: &OccupancyGrid) -> Vec<bool> {
     let flood = |start: usize, seen: &mut [bool], stack: &mut Vec<u32>| -> u64 {
         let mut count = 0;
         seen[start] = true;
-        stack.push(start as u32);
-        while let Some(i) = stack.pop() {
-            let i = i as usize;
-            count += 1;
-            let (x, y) = (i % w, i / w);
-            let mut visit = |j: usize| {
-                if !seen[j] && grid.cells[j] == Cell::Free {
-                    seen[j] = true;
-                    stack.push(j as u32);
-                }
-            };
-            if x + 1 < w {
-                visit(i + 1);
-            }
-            if x > 0 {
-                visit(i - 1);
-            }
-            if y + 1 < h {
-                visit(i + w);
-            }
-            if y > 0 {
-                visit(i - w);
-            }
-        }
+        flood4(
+            w,
+            h,
+            start,
+            stack,
+            |j| {
+                let take = !seen[j] && grid.cells[j] == Cell::Free;
+                seen[j] |= take;
+                take
+            },
+            |_| count += 1,
+        );
         count
     };
     let mut best: Option<(u64, usize)> = None;

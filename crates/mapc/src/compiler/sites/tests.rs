@@ -363,25 +363,11 @@ fn shared_maps_report() {
 
 /// Connected components of a GVD graph.
 fn components(g: &GvdGraph) -> usize {
-    let mut parent: Vec<usize> = (0..g.nodes.len()).collect();
-    fn find(p: &mut [usize], mut x: usize) -> usize {
-        while p[x] != x {
-            x = p[x];
-        }
-        x
-    }
-    let mut n = g.nodes.len();
+    let mut sets = crate::compiler::connectivity::UnionFind::new(g.nodes.len());
     for e in &g.edges {
-        let (a, b) = (
-            find(&mut parent, e.a as usize),
-            find(&mut parent, e.b as usize),
-        );
-        if a != b {
-            parent[a] = b;
-            n -= 1;
-        }
+        sets.union(e.a as usize, e.b as usize);
     }
-    n
+    sets.count()
 }
 
 /// The whole build of a real map (Intel) is the same with 1 and 2 threads.

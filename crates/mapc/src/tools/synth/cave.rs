@@ -13,6 +13,7 @@ use rayon::prelude::*;
 
 use super::draw::{chance, clampi, Outline, Rect, Scale, Span};
 use super::{Stats, FREE, OCCUPIED, UNKNOWN};
+use crate::compiler::connectivity::UnionFind;
 use crate::compiler::rng::Rng;
 
 // ---------------------------------------------------------------------------
@@ -420,15 +421,6 @@ fn chambers(
     Chambers { nx, ny, nodes }
 }
 
-/// Union-find root of `i`, with path halving.
-fn find(parent: &mut [usize], mut i: usize) -> usize {
-    while parent[i] != i {
-        parent[i] = parent[parent[i]];
-        i = parent[i];
-    }
-    i
-}
-
 /// Joins the chambers by a random spanning tree over grid neighbours
 /// (Kruskal over shuffled edges) plus a few loops; each joint is a winding
 /// tunnel, added to `caps`.
@@ -457,13 +449,9 @@ fn tunnels(
         let j = rng.below(i as u64 + 1) as usize;
         edges.swap(i, j);
     }
-    let mut parent: Vec<usize> = (0..ch.nodes.len()).collect();
+    let mut sets = UnionFind::new(ch.nodes.len());
     for &(a, b) in &edges {
-        let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
-        let tree = ra != rb;
-        if tree {
-            parent[ra] = rb;
-        }
+        let tree = sets.union(a, b);
         if !tree && !chance(rng, LOOP_CHANCE) {
             continue;
         }
