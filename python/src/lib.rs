@@ -583,7 +583,8 @@ fn build(
             accept_confidence,
             ..Default::default()
         };
-        cfg.params().map_err(|e| BuildError::new_err(e.to_string()))?;
+        cfg.params()
+            .map_err(|e| BuildError::new_err(e.to_string()))?;
         mapc::compiler::writer::check_output_path(&out_path, &[&map_yaml])
             .map_err(|e| PyOSError::new_err(format!("{}: {e}", out_path.display())))?;
         let src = mapc::compiler::mapfile::load_yaml(&map_yaml)
