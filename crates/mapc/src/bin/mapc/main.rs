@@ -45,7 +45,7 @@ enum Cmd {
     Info(inspect::InfoArgs),
     /// Check a .refdb's structure and checksums (exit 0 or 1).
     Verify(inspect::VerifyArgs),
-    /// Compare two .refdb files (sites, parameters, inputs).
+    /// Compare two .refdb files (sites, parameters, inputs, section contents; exit 1 when they differ).
     Diff(inspect::DiffArgs),
     /// Localize scans (JSON Lines, CARMEN log or ROS 2 bag) against a .refdb.
     #[command(after_long_help = localize::FORMATS)]
