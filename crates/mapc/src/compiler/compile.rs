@@ -157,8 +157,9 @@ pub fn reference_scans(
         .collect()
 }
 
-/// PGR histogram of a range scan taken with the reference sensor.
-pub fn scan_histogram(ranges: &[f32], params: &Params) -> Vec<f32> {
+/// Sensor-frame points of a reference scan's ranges (one per beam; a beam
+/// with no return is a NaN point), as the runtime reads a range scan.
+fn reference_points(ranges: &[f32], params: &Params) -> Vec<[f32; 2]> {
     let s = &params.sensor;
     let mut dense = vec![[0f32; 2]; ranges.len()];
     let n = prep::ranges_to_points(
@@ -169,8 +170,22 @@ pub fn scan_histogram(ranges: &[f32], params: &Params) -> Vec<f32> {
         s.range_max,
         &mut dense,
     );
+    dense.truncate(n);
+    dense
+}
+
+/// Point and tangent buffers for `prep::prepare`, `max_points` long.
+fn point_buffers(params: &Params) -> (Vec<[f32; 2]>, Vec<[f32; 2]>) {
     let p = params.prep.max_points as usize;
-    let (mut pts, mut tan) = (vec![[0f32; 2]; p], vec![[0f32; 2]; p]);
+    (vec![[0f32; 2]; p], vec![[0f32; 2]; p])
+}
+
+/// PGR histogram of a range scan taken with the reference sensor.
+pub fn scan_histogram(ranges: &[f32], params: &Params) -> Vec<f32> {
+    let s = &params.sensor;
+    let dense = reference_points(ranges, params);
+    let n = dense.len();
+    let (mut pts, mut tan) = point_buffers(params);
     let wrap = prep::covers_full_turn(s.angle_increment, s.beams as usize);
     let m = prep::prepare(&dense[..n], wrap, params, &mut pts, &mut tan);
     let mut h = vec![0f32; params.coarse.hist_cells()];
@@ -183,17 +198,8 @@ pub fn scan_histogram(ranges: &[f32], params: &Params) -> Vec<f32> {
 /// frame), the histogram of the beams within `width / 2` of that heading.
 pub fn window_histograms(ranges: &[f32], params: &Params) -> Vec<f32> {
     let s = &params.sensor;
-    let mut dense = vec![[0f32; 2]; ranges.len()];
-    prep::ranges_to_points(
-        ranges,
-        s.angle_min,
-        s.angle_increment,
-        s.range_min,
-        s.range_max,
-        &mut dense,
-    );
-    let p = params.prep.max_points as usize;
-    let (mut pts, mut tan) = (vec![[0f32; 2]; p], vec![[0f32; 2]; p]);
+    let dense = reference_points(ranges, params);
+    let (mut pts, mut tan) = point_buffers(params);
     let k = params.coarse.win_cells();
     let nh = params.coarse.win_headings as usize;
     let mut out = Vec::with_capacity(params.coarse.win_count() * nh * k);
