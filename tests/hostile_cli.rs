@@ -271,19 +271,19 @@ fn counts_past_their_bounds_are_refused() {
     let cases: [(&[&str], &str); 7] = [
         (
             &["eval", db, "--beams", "100000000"],
-            "--beams must be between 3 and 100000, not 100000000",
+            "'--beams <BEAMS>': must be between 3 and 100000, not 100000000",
         ),
         (
             &["eval", db, "--beams", "2"],
-            "--beams must be between 3 and 100000, not 2",
+            "'--beams <BEAMS>': must be between 3 and 100000, not 2",
         ),
         (
             &["eval", db, "--poses", "0"],
-            "--poses must be between 1 and 1000000, not 0",
+            "'--poses <POSES>': must be between 1 and 1000000, not 0",
         ),
         (
             &["eval", db, "--e1-trials", "99999999999"],
-            "--e1-trials must be between 1 and 1000000",
+            "'--e1-trials <E1_TRIALS>': must be between 1 and 1000000",
         ),
         (
             &["eval", db, "--outliers", "400"],
