@@ -184,10 +184,9 @@ fn point_buffers(params: &Params) -> (Vec<[f32; 2]>, Vec<[f32; 2]>) {
 pub fn scan_histogram(ranges: &[f32], params: &Params) -> Vec<f32> {
     let s = &params.sensor;
     let dense = reference_points(ranges, params);
-    let n = dense.len();
     let (mut pts, mut tan) = point_buffers(params);
     let wrap = prep::covers_full_turn(s.angle_increment, s.beams as usize);
-    let m = prep::prepare(&dense[..n], wrap, params, &mut pts, &mut tan);
+    let m = prep::prepare(&dense, wrap, params, &mut pts, &mut tan);
     let mut h = vec![0f32; params.coarse.hist_cells()];
     pgr::histogram(&pts[..m], &tan[..m], params, &mut h);
     h

@@ -231,12 +231,16 @@ fn site_data_changes<D: AsRef<[u8]>>(
     db: &RefDb<D>,
     i: usize,
 ) -> Vec<&'static str> {
-    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
+    let differ = |x: &[f32], y: &[f32]| {
+        !x.iter()
+            .map(|v| v.to_bits())
+            .eq(y.iter().map(|v| v.to_bits()))
+    };
     let mut what = Vec::new();
-    if bits(da.scan(j)) != bits(db.scan(i)) {
+    if differ(da.scan(j), db.scan(i)) {
         what.push("scan");
     }
-    if bits(da.hist(j)) != bits(db.hist(i)) {
+    if differ(da.hist(j), db.hist(i)) {
         what.push("histogram");
     }
     let (pa, pb) = (&da.params().coarse, &db.params().coarse);
@@ -247,7 +251,7 @@ fn site_data_changes<D: AsRef<[u8]>>(
     let (nw, nh) = layout(pa);
     let windows_differ = (0..nw)
         .flat_map(|w| (0..nh as usize).map(move |h| (w, h)))
-        .any(|(w, h)| bits(da.window_hist(j, w, h)) != bits(db.window_hist(i, w, h)));
+        .any(|(w, h)| differ(da.window_hist(j, w, h), db.window_hist(i, w, h)));
     if windows_differ {
         what.push("window histograms");
     }
