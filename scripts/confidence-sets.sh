@@ -1,0 +1,61 @@
+#!/usr/bin/env bash
+# Builds the answer sets that scripts/fit-confidence.py fits and tests the
+# confidence model on (docs/confidence.md): the shared real logs against
+# their truth, simulated scans of several maps (`mapc eval --dump`), and
+# scans localized on another building's map. Needs ../shared (maps, logs).
+#
+#   scripts/confidence-sets.sh [OUT_DIR]   (default build-artifacts/conf)
+#
+# Prints the --train and --test arguments for scripts/fit-confidence.py.
+# Seed 11 makes the fitting sets, seed 12 the held-out ones. About 15
+# minutes on 2 cores (release build first).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+S=${SHARED:-../shared}
+O=${1:-build-artifacts/conf}
+M=target/release/mapc
+if [ ! -d "$S/maps" ] || [ ! -d "$S/logs" ]; then
+  echo "confidence-sets.sh: needs the shared maps and logs at $S (set SHARED=...)" >&2
+  exit 2
+fi
+cargo build --release -q -p mapc
+mkdir -p "$O"
+db() { [ -s "$O/$1.refdb" ] || $M build -q "$S/maps/$1/$1.yaml" -o "$O/$1.refdb"; }
+for m in intel aces csail tb3-world nav2-warehouse willow-full; do db $m; done
+for m in intel aces csail; do
+  $M localize -q "$O/$m.refdb" "$S/logs/$m/$m-corrected.log.gz" \
+    --truth "$S/logs/$m/$m-poses-in-map.txt" > "$O/real-$m.jsonl"
+done
+# sim NAME DB SEED POSES [eval options]: static and dynamic scans localized
+# on DB against their truth.
+dump() {
+  local name=$1 dbn=$2 seed=$3 poses=$4 exps=$5; shift 5
+  $M eval -q "$O/$dbn.refdb" --experiments "$exps" --poses "$poses" --seed "$seed" \
+    --dump "$O/dump-$name" --out "$O/dump-$name/report" --no-figures "$@" > /dev/null
+}
+sim() {
+  local name=$1 dbn=$2 seed=$3 poses=$4; shift 4
+  local d="$O/dump-$name"
+  dump "$name" "$dbn" "$seed" "$poses" static,dynamic "$@"
+  for e in static dynamic; do
+    $M localize -q "$O/$dbn.refdb" "$d/$e-scans.jsonl" --truth "$d/$e-truth.txt" \
+      > "$O/sim-$name-$e.jsonl"
+  done
+}
+sim intel360 intel 11 300
+sim intel180 intel 11 300 --fov 180 --beams 361
+sim tb3 tb3-world 11 200
+sim warehouse180 nav2-warehouse 12 200 --fov 180 --beams 361
+sim willow360 willow-full 12 200
+# wrong map: scans simulated on one building, localized on another.
+dump aces aces 11 300 static
+dump csail csail 12 300 static
+$M localize -q "$O/intel.refdb" "$O/dump-aces/static-scans.jsonl" > "$O/wrong-aces-on-intel.jsonl"
+$M localize -q "$O/aces.refdb" "$O/dump-csail/static-scans.jsonl" > "$O/wrong-csail-on-aces.jsonl"
+T=(real:$O/real-intel.jsonl real:$O/real-aces.jsonl)
+for n in intel360 intel180 tb3; do T+=(sim:$O/sim-$n-static.jsonl sim:$O/sim-$n-dynamic.jsonl); done
+T+=(wrong:$O/wrong-aces-on-intel.jsonl)
+H=(real:$O/real-csail.jsonl)
+for n in warehouse180 willow360; do H+=(sim:$O/sim-$n-static.jsonl sim:$O/sim-$n-dynamic.jsonl); done
+H+=(wrong:$O/wrong-csail-on-aces.jsonl)
+echo "--train ${T[*]} --test ${H[*]}"
