@@ -22,6 +22,14 @@ cargo build --release -q -p mapc
 mkdir -p "$O"
 db() { [ -s "$O/$1.refdb" ] || $M build -q "$S/maps/$1/$1.yaml" -o "$O/$1.refdb"; }
 for m in intel aces csail tb3-world nav2-warehouse willow-full; do db $m; done
+# Synthetic offices (clean, rectilinear, alike), held out.
+for seed in 21 22 31 32; do
+  n=office-s$seed
+  [ -s "$O/$n.refdb" ] || {
+    $M synth -q --kind office --width 400 --height 400 --seed $seed --out "$O/synth" --name $n > /dev/null
+    $M build -q "$O/synth/$n.yaml" -o "$O/$n.refdb"
+  }
+done
 for m in intel aces csail; do
   $M localize -q "$O/$m.refdb" "$S/logs/$m/$m-corrected.log.gz" \
     --truth "$S/logs/$m/$m-poses-in-map.txt" > "$O/real-$m.jsonl"
@@ -45,6 +53,8 @@ sim() {
 sim intel360 intel 11 300
 sim intel180 intel 11 300 --fov 180 --beams 361
 sim tb3 tb3-world 11 200
+sim office22 office-s22 11 200
+sim office32 office-s32 12 200
 sim warehouse180 nav2-warehouse 12 200 --fov 180 --beams 361
 sim willow360 willow-full 12 200
 # wrong map: scans simulated on one building, localized on another.
@@ -52,10 +62,18 @@ dump aces aces 11 300 static
 dump csail csail 12 300 static
 $M localize -q "$O/intel.refdb" "$O/dump-aces/static-scans.jsonl" > "$O/wrong-aces-on-intel.jsonl"
 $M localize -q "$O/aces.refdb" "$O/dump-csail/static-scans.jsonl" > "$O/wrong-csail-on-aces.jsonl"
+dump office21 office-s21 11 200 static
+dump office31 office-s31 12 200 static
+$M localize -q "$O/office-s22.refdb" "$O/dump-office21/static-scans.jsonl" > "$O/wrong-office21-on-22.jsonl"
+$M localize -q "$O/office-s32.refdb" "$O/dump-office31/static-scans.jsonl" > "$O/wrong-office31-on-32.jsonl"
 T=(real:$O/real-intel.jsonl real:$O/real-aces.jsonl)
 for n in intel360 intel180 tb3; do T+=(sim:$O/sim-$n-static.jsonl sim:$O/sim-$n-dynamic.jsonl); done
 T+=(wrong:$O/wrong-aces-on-intel.jsonl)
 H=(real:$O/real-csail.jsonl)
-for n in warehouse180 willow360; do H+=(sim:$O/sim-$n-static.jsonl sim:$O/sim-$n-dynamic.jsonl); done
+for n in warehouse180 willow360 office22 office32; do H+=(sim:$O/sim-$n-static.jsonl sim:$O/sim-$n-dynamic.jsonl); done
 H+=(wrong:$O/wrong-csail-on-aces.jsonl)
+# Scans of one synthetic office on another's map: reported, not fitted on
+# (a room of one fits the same-sized room of the other, so no single-scan
+# feature can reject them all; fitting on them costs real right answers).
+H+=(wrong:$O/wrong-office21-on-22.jsonl wrong:$O/wrong-office31-on-32.jsonl)
 echo "--train ${T[*]} --test ${H[*]}"

@@ -59,6 +59,8 @@ def rows(path, kind):
         support = sum(1 for c in cs if not distinct(c, best))
         x = [r["evidence"] / (HIT * n), (r["evidence"] - alt) / (HIT * n),
              math.log(max(support, 1)), r["through_beams"] / n]
+        if "spread" in best:
+            x.append(best["spread"])
         y = 0 if kind == "wrong" else int(near(r, t[:3] if isinstance(t, list) else [t["x"], t["y"], t["theta"]]))
         out.append((x, y, bool(r["ambiguous"]), bool(r["accepted"])))
     return out

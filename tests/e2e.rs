@@ -329,10 +329,13 @@ fn localize_against_several_maps_says_which_map() {
         assert!(((x - p.x as f64).powi(2) + (y - p.y as f64).powi(2)).sqrt() < 0.1);
         let maps = r["maps"].as_array().unwrap();
         assert_eq!(maps.len(), 2);
-        assert_eq!(
-            maps[0]["accepted"], false,
-            "the other building accepted {r}"
-        );
+        // The other office may accept a scan taken in a room its own
+        // same-sized room explains (docs/confidence.md: 12-18% of scans of
+        // one synthetic office accepted on another's map); it must be the
+        // less confident map.
+        let other_conf = maps[0]["confidence"].as_f64().unwrap();
+        let demo_conf = maps[1]["confidence"].as_f64().unwrap();
+        assert!(other_conf < demo_conf, "the other building won {r}");
     }
     assert!(text(&o).contains("none: 0"), "{}", text(&o));
     // Options that belong to one map are refused with several.

@@ -11,7 +11,7 @@ use core::fmt;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::coarse::{self, Ranked};
-use crate::confidence::Decision;
+use crate::confidence::{self, Decision};
 use crate::db::RefDb;
 use crate::params::Params;
 use crate::prep;
@@ -184,6 +184,11 @@ pub struct Candidate {
     /// beam (see [`crate::verify::Vicinity::evidence`]); selection,
     /// ambiguity and acceptance compare it with the threshold.
     pub evidence: f32,
+    /// How loosely the scan pins the position: `ln(spread / resolution)`
+    /// of [`crate::refine::position_spread`] at this pose, clamped to
+    /// +-[`crate::confidence::SPREAD_MAX`]; the maximum with no pose or a
+    /// degenerate fit. A feature of the confidence ([`crate::confidence`]).
+    pub spread: f32,
 }
 
 /// Most hypotheses a [`Localization`] reports.
@@ -706,6 +711,21 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         verifier.score(sensor, beams.zip(self.b.in_rng[..n].iter().copied()))
     }
 
+    /// The confidence's spread feature ([`Candidate::spread`]) of a sensor
+    /// pose.
+    pub fn spread_at(&self, sensor: &Pose2) -> f32 {
+        let p = self.params;
+        let res = self.db.frame().resolution;
+        let spread = refine::position_spread(
+            &self.dm,
+            &self.b.in_pts[..self.scan.beams],
+            sensor,
+            p.refine.refine_max_dist,
+            res * COVARIANCE_FLOOR_CELLS,
+        );
+        confidence::spread_feature(spread, res)
+    }
+
     /// Stage 3, the fine stage on coarse candidate `c`: SSM against its
     /// site, verification, and refinement of a promising pose
     /// ([`Localizer::refine_if_promising`]). Records and returns the candidate
@@ -735,6 +755,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
                 through_beams: v.through,
                 free_space_ok: v.free_space_ok(p.verify.through_max) as u32,
                 evidence: v.evidence(p.verify.short_weight, p.verify.occlusion_fit),
+                spread: self.spread_at(&sensor),
                 ..cand
             };
             // A pose the prior rules out is no answer.
@@ -867,6 +888,7 @@ fn unexamined(c: usize, r: &Ranked) -> Candidate {
         site: r.site,
         rank: c as u32,
         gamma: r.gamma,
+        spread: confidence::SPREAD_MAX,
         ..Candidate::default()
     }
 }

@@ -133,6 +133,7 @@ fn cost(dm: &DistMap<'_>, pts: &[[f32; 2]], pose: &Pose2, max_dist: f32) -> (f32
 
 /// The robust (Cauchy-weighted) Gauss-Newton normal equations of the
 /// points' distances to the map's surfaces at `pose`.
+#[derive(Clone, Copy)]
 struct NormalEquations {
     /// `J^T W J`.
     h: [[f32; 3]; 3],
@@ -262,9 +263,14 @@ pub fn covariance(
     max_dist: f32,
     floor_m: f32,
 ) -> Option<[f32; 9]> {
+    covariance_of(&normal_equations(dm, pts, pose, max_dist), floor_m)
+}
+
+/// [`covariance`] from the normal equations at the pose.
+fn covariance_of(ne: &NormalEquations, floor_m: f32) -> Option<[f32; 9]> {
     let NormalEquations {
         h, wsum, wd2, n, ..
-    } = normal_equations(dm, pts, pose, max_dist);
+    } = *ne;
     if n < 4 || !(wsum > 0.0) {
         return None;
     }
@@ -289,6 +295,31 @@ pub fn covariance(
     } else {
         None
     }
+}
+
+/// How loosely the scan pins the position of a fitted sensor pose: the
+/// standard deviation (m) along the worst direction of the position part
+/// of [`covariance`], scaled to one point (times the square root of the
+/// points that carried weight), so that it does not depend on the beam
+/// count. Small where walls all round pin the pose and the points lie on
+/// them; large along a featureless corridor, where the fit cannot tell how
+/// far along it is, or where the points lie off the surfaces. `None` when
+/// [`covariance`] is.
+pub fn position_spread(
+    dm: &DistMap<'_>,
+    pts: &[[f32; 2]],
+    pose: &Pose2,
+    max_dist: f32,
+    floor_m: f32,
+) -> Option<f32> {
+    let ne = normal_equations(dm, pts, pose, max_dist);
+    let c = covariance_of(&ne, floor_m)?;
+    // Largest eigenvalue of the symmetric 2x2 block [[a, b], [b, d]].
+    let (a, b, d) = (c[0], c[1], c[4]);
+    let half = 0.5 * (a - d);
+    let top = 0.5 * (a + d) + libm::sqrtf(half * half + b * b);
+    let spread = libm::sqrtf(top * ne.n as f32);
+    spread.is_finite().then_some(spread)
 }
 
 /// Solves the 3x3 system `h x = g` (Cramer's rule); `None` when singular.
@@ -319,7 +350,71 @@ fn solve3(h: &[[f32; 3]; 3], g: &[f32; 3]) -> Option<[f32; 3]> {
 
 #[cfg(test)]
 mod tests {
-    use super::floor_i64;
+    use super::{floor_i64, position_spread, DistMap};
+    use crate::format::dist_encode;
+    use crate::{MapFrame, Pose2};
+
+    /// A 60 x 60 grid at 0.05 m whose border cells are walls on the sides
+    /// `walls` names (left, right, bottom, top), as the compiler encodes it:
+    /// the distance between cell centres less half a cell.
+    fn boxed(walls: [bool; 4]) -> Vec<u8> {
+        let n = 60i32;
+        let mut out = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                let wall = (walls[0] && x == 0)
+                    || (walls[1] && x == n - 1)
+                    || (walls[2] && y == 0)
+                    || (walls[3] && y == n - 1);
+                let mut d = f32::INFINITY;
+                for (on, v) in [
+                    (walls[0], x),
+                    (walls[1], n - 1 - x),
+                    (walls[2], y),
+                    (walls[3], n - 1 - y),
+                ] {
+                    if on {
+                        d = d.min(v as f32);
+                    }
+                }
+                out.push(dist_encode(if wall { -0.5 } else { d - 0.5 }));
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn walls_all_round_pin_the_position_and_a_corridor_does_not() {
+        let frame = MapFrame {
+            resolution: 0.05,
+            origin: Pose2::new(0.0, 0.0, 0.0),
+        };
+        fn dm(data: &[u8], frame: MapFrame) -> DistMap<'_> {
+            DistMap {
+                width: 60,
+                height: 60,
+                data,
+                frame,
+                rot: (0.0, 1.0),
+            }
+        }
+        // Points on the inner faces of all four walls (sensor at the centre).
+        let mut pts = Vec::new();
+        for k in 0..40 {
+            let t = -1.0 + k as f32 * 0.05;
+            pts.extend([[-1.45, t], [1.45, t], [t, -1.45], [t, 1.45]]);
+        }
+        let centre = Pose2::new(1.5, 1.5, 0.0);
+        let room = boxed([true; 4]);
+        let r = position_spread(&dm(&room, frame), &pts, &centre, 0.3, 0.0144).unwrap();
+        assert!(r < 0.1, "{r}");
+        // The same points along a corridor open at both ends: only the
+        // side walls' points count, and they say nothing along it.
+        let corridor = boxed([false, false, true, true]);
+        let side: Vec<[f32; 2]> = pts.iter().copied().filter(|p| p[1].abs() > 1.4).collect();
+        let c = position_spread(&dm(&corridor, frame), &side, &centre, 0.3, 0.0144);
+        assert!(c.is_none_or(|c| c > 10.0 * r), "{c:?} vs {r}");
+    }
 
     #[test]
     fn floor_matches_libm() {

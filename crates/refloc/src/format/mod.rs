@@ -191,26 +191,32 @@ pub struct DecisionRecord {
     pub weights: [F32; 4],
     /// Accept when the confidence is at least this (0..=1).
     pub threshold: F32,
+    /// Weight of the spread (`confidence::Features::spread`); zero in files
+    /// written before it, which leaves their model as it was.
+    pub spread_weight: F32,
     /// Zero.
-    pub reserved: [U32; 2],
+    pub reserved: U32,
 }
 
 impl DecisionRecord {
     /// The record of a model.
     pub fn of(d: &crate::confidence::Decision) -> DecisionRecord {
+        let [e, m, s, t, spread] = d.weights;
         DecisionRecord {
             bias: F32::new(d.bias),
-            weights: d.weights.map(F32::new),
+            weights: [e, m, s, t].map(F32::new),
             threshold: F32::new(d.threshold),
-            reserved: [U32::new(0); 2],
+            spread_weight: F32::new(spread),
+            reserved: U32::new(0),
         }
     }
 
     /// The model of a record (unchecked: see [`crate::confidence::Decision::is_valid`]).
     pub fn decision(&self) -> crate::confidence::Decision {
+        let [e, m, s, t] = self.weights.map(|w| w.get());
         crate::confidence::Decision {
             bias: self.bias.get(),
-            weights: self.weights.map(|w| w.get()),
+            weights: [e, m, s, t, self.spread_weight.get()],
             threshold: self.threshold.get(),
         }
     }

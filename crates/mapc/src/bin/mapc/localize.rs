@@ -775,7 +775,7 @@ impl Found<'_, '_> {
                 .map(|c| json!({"site": c.site, "rank": c.rank, "gamma": c.gamma, "match_score": c.match_score,
                     "has_pose": c.has_pose != 0, "x": c.x, "y": c.y, "theta": c.theta, "vicinity": c.vicinity,
                     "evidence": c.evidence, "free_space_ok": c.free_space_ok != 0, "short_beams": c.short_beams, "pairs": c.pairs,
-                    "through_beams": c.through_beams, "long_beams": c.long_beams}))
+                    "through_beams": c.through_beams, "long_beams": c.long_beams, "spread": c.spread}))
                 .collect();
         }
         if let (Some((e, et)), Some(j)) = (self.err, self.judged) {
