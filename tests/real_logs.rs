@@ -195,7 +195,9 @@ fn csail_log_against_csail_map() {
 /// Regression bounds on every 5th scan of the Intel and ACES logs (182 and
 /// 88 scans; the whole logs take too long for CI). Measured when set
 /// (2026-12-04, against the corrected truth): Intel 81.9% / 4.4%, ACES
-/// 76.1% / 2.3%; the bounds leave a few scans of slack. Both logs were
+/// 76.1% / 2.3%; with the confidence's spread feature (2026-12-06):
+/// Intel 81.3% / 3.8%, ACES 77.3% / 2.3%, and Intel's false-accept bound
+/// went from 6% to 5%. The bounds leave a few scans of slack. Both logs were
 /// used to fit the decision model (docs/confidence.md), so these guard
 /// against regressions; they are not held-out figures.
 #[test]
@@ -206,7 +208,7 @@ fn intel_and_aces_logs_do_not_regress() {
             "Intel accepted and correct {}",
             r.correct_c
         );
-        assert!(r.false_c <= 0.06, "Intel false accepts {}", r.false_c);
+        assert!(r.false_c <= 0.05, "Intel false accepts {}", r.false_c);
     }
     if let Some(r) = real_log("aces", 180, 5) {
         assert!(
