@@ -7,8 +7,8 @@
 #   scripts/confidence-sets.sh [OUT_DIR]   (default build-artifacts/conf)
 #
 # Prints the --train and --test arguments for scripts/fit-confidence.py.
-# Seed 11 makes the fitting sets, seed 12 the held-out ones. About 15
-# minutes on 2 cores (release build first).
+# Seed 11 makes the fitting sets, seed 12 the held-out ones. About 7
+# minutes on 2 cores after the release build.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 S=${SHARED:-../shared}
@@ -34,13 +34,15 @@ for m in intel aces csail; do
   $M localize -q "$O/$m.refdb" "$S/logs/$m/$m-corrected.log.gz" \
     --truth "$S/logs/$m/$m-poses-in-map.txt" > "$O/real-$m.jsonl"
 done
-# sim NAME DB SEED POSES [eval options]: static and dynamic scans localized
-# on DB against their truth.
+# dump NAME DB SEED POSES EXPERIMENTS [eval options]: the simulated scans
+# and truth of `mapc eval --dump` in $O/dump-NAME.
 dump() {
   local name=$1 dbn=$2 seed=$3 poses=$4 exps=$5; shift 5
   $M eval -q "$O/$dbn.refdb" --experiments "$exps" --poses "$poses" --seed "$seed" \
     --dump "$O/dump-$name" --out "$O/dump-$name/report" --no-figures "$@" > /dev/null
 }
+# sim NAME DB SEED POSES [eval options]: static and dynamic scans localized
+# on DB against their truth.
 sim() {
   local name=$1 dbn=$2 seed=$3 poses=$4; shift 4
   local d="$O/dump-$name"

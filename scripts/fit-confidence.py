@@ -12,8 +12,9 @@ KIND says how an answer is labelled right (within 0.3 m and 5 degrees):
   wrong  never (scans of another map)
 
 Prints the fitted coefficients (bias, then the weights of the evidence
-ratio, the margin, ln support and the through share, as
-refloc::confidence::Decision), then per file: answers, selected-correct,
+ratio, the margin, ln support, the through share and, when the answers'
+candidates carry it (`mapc localize` since the spread feature; all files
+of one run alike), the spread, as refloc::confidence::Decision), then per file: answers, selected-correct,
 accepted-and-correct / false accepts at the threshold with the model (an
 ambiguous answer capped at 0.5, as the runtime does) and with the file's own
 `accepted` field, the Brier score, and a reliability table over the test
