@@ -17,7 +17,7 @@
 //!
 //! The pose maps input points into the reference scan's frame: p = R r + q.
 
-use crate::math::{dist2, norm, signed_angle};
+use crate::math::dist2;
 use crate::params::Params;
 use crate::Pose2;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
@@ -44,9 +44,9 @@ pub struct Affinity {
 /// Working memory for one match, carved from the localizer's scratch.
 pub struct SsmWork<'a> {
     /// Input descriptors, `max_points * DESC_LEN`.
-    pub qdesc: &'a mut [f32],
+    pub qdesc: &'a mut [DescBin],
     /// Reference descriptors, `max_points * DESC_LEN`.
-    pub rdesc: &'a mut [f32],
+    pub rdesc: &'a mut [DescBin],
     /// Tentative correspondences (input index, reference index).
     pub tent: &'a mut [[u16; 2]],
     /// Sparse affinity.
@@ -80,38 +80,123 @@ pub struct SsmResult {
     pub nonzeros: u32,
 }
 
-/// Computes the local descriptor of every point of a prepared scan.
-pub fn descriptors(pts: &[[f32; 2]], tan: &[[f32; 2]], radius: f32, out: &mut [f32]) {
-    let n = pts.len().min(tan.len()).min(out.len() / DESC_LEN);
-    let r2 = radius * radius;
-    for v in out[..n * DESC_LEN].iter_mut() {
-        *v = 0.0;
+/// One descriptor bin: the share of a point's neighbours that fall in it,
+/// in units of `1 / DESC_SCALE` (a descriptor's bins sum to about
+/// [`DESC_SCALE`]). Bytes make the L1 distance of [`tentative`] a sum of
+/// absolute byte differences, which vector units do 16 or more at a time.
+pub type DescBin = u16;
+
+/// What a descriptor's bins sum to (to within rounding).
+pub const DESC_SCALE: u32 = 65535;
+
+/// `tan(pi / 8)`: the descriptor's theta bins are 45 degrees wide, centred
+/// on multiples of 45 degrees (as [`crate::pgr::cell`] centres its bins), so
+/// their edges lie at 22.5 degrees from an axis or a diagonal.
+const TAN_EIGHTH_PI: f32 = 0.414_213_57;
+
+// The comparisons of `desc_cell` are written for 8 theta bins.
+const _: () = assert!(DESC_THETA == 8);
+
+/// The theta bin (0..8) of a direction at `(dot, cross)` from a point's
+/// tangent: the bin of [`crate::pgr::cell`] for `theta = atan2(cross, dot)`
+/// (bin 0 is centred on pi, bin 4 on 0), found by comparisons instead of an
+/// arctangent.
+#[inline]
+fn theta_octant(dot: f32, cross: f32) -> usize {
+    let (ac, as_) = (libm::fabsf(dot), libm::fabsf(cross));
+    if as_ <= TAN_EIGHTH_PI * ac {
+        // Along the tangent: 0 (bin 4) or pi (bin 0).
+        if dot > 0.0 {
+            4
+        } else {
+            0
+        }
+    } else if ac <= TAN_EIGHTH_PI * as_ {
+        // Across it: +pi/2 (bin 6) or -pi/2 (bin 2).
+        if cross > 0.0 {
+            6
+        } else {
+            2
+        }
+    } else {
+        match (dot > 0.0, cross > 0.0) {
+            (true, true) => 5,
+            (false, true) => 7,
+            (false, false) => 1,
+            (true, false) => 3,
+        }
     }
+}
+
+/// Computes the local descriptor of every point of a prepared scan: for
+/// point `i`, the (rho, theta) histogram of the points within `radius` (m)
+/// (`DESC_RHO` equal rho bins, `DESC_THETA` theta bins around `i`'s
+/// tangent, the binning of [`crate::pgr::cell`]), normalized to sum
+/// [`DESC_SCALE`] and rounded to bytes. A point with no neighbour has an
+/// all-zero descriptor.
+pub fn descriptors(pts: &[[f32; 2]], tan: &[[f32; 2]], radius: f32, out: &mut [DescBin]) {
+    let n = pts.len().min(tan.len()).min(out.len() / DESC_LEN);
+    out[..n * DESC_LEN].fill(0);
+    // Squared rho bin edges: rho < (k+1) r / DESC_RHO.
+    let mut edges = [0.0f32; DESC_RHO];
+    for (k, e) in edges.iter_mut().enumerate() {
+        let v = radius * (k + 1) as f32 / DESC_RHO as f32;
+        *e = v * v;
+    }
+    let r2 = edges[DESC_RHO - 1];
+    let rho_bin = |d2: f32| {
+        edges
+            .iter()
+            .take(DESC_RHO - 1)
+            .filter(|&&e| d2 >= e)
+            .count()
+    };
+    // One row at a time: counts (at most n - 1 per bin), then shares.
+    let mut counts = [0u16; DESC_LEN];
     for i in 0..n {
-        let mut count = 0u32;
-        let row = &mut out[i * DESC_LEN..(i + 1) * DESC_LEN];
-        for j in 0..n {
+        counts.fill(0);
+        let (pi, ui) = (pts[i], tan[i]);
+        let mut total = 0u32;
+        for (j, pj) in pts[..n].iter().enumerate() {
             if i == j {
                 continue;
             }
-            let d = [pts[j][0] - pts[i][0], pts[j][1] - pts[i][1]];
+            let d = [pj[0] - pi[0], pj[1] - pi[1]];
             let d2 = d[0] * d[0] + d[1] * d[1];
             if !(d2 < r2) {
                 continue;
             }
-            let rho = libm::sqrtf(d2);
-            let th = signed_angle(tan[i], d);
-            let c = crate::pgr::cell(rho, th, DESC_RHO, DESC_THETA, radius);
-            row[c] += 1.0;
-            count += 1;
+            let dot = ui[0] * d[0] + ui[1] * d[1];
+            let cross = ui[0] * d[1] - ui[1] * d[0];
+            let c = rho_bin(d2) * DESC_THETA + theta_octant(dot, cross);
+            counts[c] = counts[c].saturating_add(1);
+            total += 1;
         }
-        if count > 0 {
-            let s = 1.0 / count as f32;
-            for v in row.iter_mut() {
-                *v *= s;
+        let row = &mut out[i * DESC_LEN..(i + 1) * DESC_LEN];
+        for (o, &c) in row.iter_mut().zip(counts.iter()) {
+            // Rounded share; c <= total, so the result is at most DESC_SCALE
+            // (no neighbour: the row stays 0).
+            if let Some(v) = (c as u32 * DESC_SCALE + total / 2).checked_div(total) {
+                *o = v as DescBin;
             }
         }
     }
+}
+
+/// The descriptors of `d`, one row of [`DESC_LEN`] bins each.
+fn rows(d: &[DescBin]) -> impl Iterator<Item = &[DescBin; DESC_LEN]> {
+    d.chunks_exact(DESC_LEN)
+        .filter_map(|c| <&[DescBin; DESC_LEN]>::try_from(c).ok())
+}
+
+/// L1 distance of two descriptors (in units of `1 / DESC_SCALE`).
+#[inline]
+pub fn desc_distance(a: &[DescBin; DESC_LEN], b: &[DescBin; DESC_LEN]) -> u32 {
+    let mut d = 0u32;
+    for t in 0..DESC_LEN {
+        d += a[t].abs_diff(b[t]) as u32;
+    }
+    d
 }
 
 /// Runs SSM between input (`q_*`) and reference (`r_*`) prepared scans whose
@@ -256,37 +341,32 @@ pub fn match_scans(
 
 /// Fills `out` with tentative correspondences: for each of the `nq` input
 /// points, the `k` reference points (of `nr`) with the closest descriptors
-/// (L1). Returns how many were written.
+/// ([`desc_distance`]; the lower index on a tie). Returns how many were
+/// written.
 pub fn tentative(
     nq: usize,
     nr: usize,
     k: usize,
-    qdesc: &[f32],
-    rdesc: &[f32],
+    qdesc: &[DescBin],
+    rdesc: &[DescBin],
     out: &mut [[u16; 2]],
 ) -> usize {
     let k = k.min(nr).min(crate::params::MAX_TENTATIVE_K as usize);
     if k == 0 {
         return 0;
     }
-    let nq = nq.min(qdesc.len() / DESC_LEN).min(u16::MAX as usize);
     let nr = nr.min(rdesc.len() / DESC_LEN).min(u16::MAX as usize);
     let mut nl = 0usize;
-    let mut best = [(f32::INFINITY, 0u16); crate::params::MAX_TENTATIVE_K as usize];
-    for i in 0..nq {
+    let mut best = [(u32::MAX, 0u16); crate::params::MAX_TENTATIVE_K as usize];
+    for (i, q) in rows(qdesc).take(nq.min(u16::MAX as usize)).enumerate() {
         if nl + k > out.len() {
             break;
         }
-        let qd = &qdesc[i * DESC_LEN..(i + 1) * DESC_LEN];
         for b in best[..k].iter_mut() {
-            *b = (f32::INFINITY, 0);
+            *b = (u32::MAX, 0);
         }
-        for j in 0..nr {
-            let rd = &rdesc[j * DESC_LEN..(j + 1) * DESC_LEN];
-            let mut d = 0.0f32;
-            for t in 0..DESC_LEN {
-                d += libm::fabsf(qd[t] - rd[t]);
-            }
+        for (j, r) in rows(rdesc).take(nr).enumerate() {
+            let d = desc_distance(q, r);
             if d < best[k - 1].0 {
                 let mut p = k - 1;
                 while p > 0 && d < best[p - 1].0 {
@@ -297,7 +377,7 @@ pub fn tentative(
             }
         }
         for b in &best[..k] {
-            if b.0.is_finite() {
+            if b.0 != u32::MAX {
                 out[nl] = [i as u16, b.1];
                 nl += 1;
             }
@@ -337,27 +417,31 @@ pub fn pair_deformation(
     );
     let dq = [pj[0] - pi[0], pj[1] - pi[1]];
     let dr = [rj[0] - ri[0], rj[1] - ri[1]];
-    let (lq, lr) = (norm(dq), norm(dr));
-    let drho = lq - lr;
-    if !(libm::fabsf(drho) < max_rho_dev) || lq.is_nan() || lr.is_nan() || lq <= 0.0 || lr <= 0.0 {
+    let (lq2, lr2) = (dq[0] * dq[0] + dq[1] * dq[1], dr[0] * dr[0] + dr[1] * dr[1]);
+    if !(lq2 > 0.0 && lr2 > 0.0) {
         return None;
     }
-    // cos of the angle difference at i (tangent u_i vs u_i') and at j (with -d).
-    let cos_at = |u: [f32; 2], v: [f32; 2], sign: f32| {
-        // (u . d, u x d) / |d| for the input and the reference, then their dot.
-        let (cq, sq) = (
-            sign * (u[0] * dq[0] + u[1] * dq[1]) / lq,
-            sign * (u[0] * dq[1] - u[1] * dq[0]) / lq,
-        );
-        let (cr, sr) = (
-            sign * (v[0] * dr[0] + v[1] * dr[1]) / lr,
-            sign * (v[0] * dr[1] - v[1] * dr[0]) / lr,
-        );
-        cq * cr + sq * sr
+    // Most pairs fail the rho test; reject them before any square root:
+    // (lq + lr)^2 <= 2 (lq^2 + lr^2), so (lq^2 - lr^2)^2 >= 2 dev^2 (lq^2 +
+    // lr^2) implies |lq - lr| >= dev.
+    let diff = lq2 - lr2;
+    if diff * diff >= 2.0 * max_rho_dev * max_rho_dev * (lq2 + lr2) {
+        return None;
+    }
+    let (lq, lr) = (libm::sqrtf(lq2), libm::sqrtf(lr2));
+    let drho = lq - lr;
+    if !(libm::fabsf(drho) < max_rho_dev) {
+        return None;
+    }
+    // cos of the angle difference at i (tangent u_i vs u_i', direction d)
+    // and at j (with -d): with a = u . d and c = u x d on each side,
+    // (a_q a_r + c_q c_r) / (lq lr); the sign of d cancels in the product.
+    let side = |u: [f32; 2], v: [f32; 2]| {
+        (u[0] * dq[0] + u[1] * dq[1]) * (v[0] * dr[0] + v[1] * dr[1])
+            + (u[0] * dq[1] - u[1] * dq[0]) * (v[0] * dr[1] - v[1] * dr[0])
     };
-    let c1 = cos_at(*q_tan.get(i)?, *r_tan.get(ii)?, 1.0);
-    let c2 = cos_at(*q_tan.get(j)?, *r_tan.get(jj)?, -1.0);
-    Some((drho, 2.0 - (c1 + c2)))
+    let sum = side(*q_tan.get(i)?, *r_tan.get(ii)?) + side(*q_tan.get(j)?, *r_tan.get(jj)?);
+    Some((drho, 2.0 - sum / (lq * lr)))
 }
 
 /// The logistic pairwise potential of eq. 4: `1 / (1 + exp(-(w0 + w1 drho^2 + w2 dtheta^2)))`.
@@ -511,4 +595,160 @@ fn ransac(
         return None;
     }
     Some((pose, inliers))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::f32::consts::PI;
+
+    /// A small deterministic generator (SplitMix64) in [lo, hi).
+    struct Gen(u64);
+    impl Gen {
+        fn range(&mut self, lo: f32, hi: f32) -> f32 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^= z >> 31;
+            lo + (hi - lo) * ((z >> 40) as f32 / (1u64 << 24) as f32)
+        }
+    }
+
+    #[test]
+    fn octants_are_the_bins_of_pgr_cell() {
+        // Directions away from the bin edges (22.5 + 45 k degrees) land in
+        // the bin the arctangent-based binning gives.
+        let mut g = Gen(7);
+        for _ in 0..5000 {
+            let t = g.range(-PI, PI);
+            let to_edge = libm::fabsf(libm::remainderf(t - PI / 8.0, PI / 4.0));
+            if to_edge < 1e-3 {
+                continue;
+            }
+            let r = g.range(0.01, 3.0);
+            let (dot, cross) = (r * libm::cosf(t), r * libm::sinf(t));
+            let want = crate::pgr::cell(0.0, t, 1, DESC_THETA, 1.0);
+            assert_eq!(theta_octant(dot, cross), want, "theta {t}");
+        }
+        // Straight ahead and straight behind sit in the middle of bins 4 and 0.
+        assert_eq!(theta_octant(1.0, 0.0), 4);
+        assert_eq!(theta_octant(-1.0, 0.0), 0);
+        assert_eq!(theta_octant(-1.0, -0.0), 0);
+    }
+
+    #[test]
+    fn descriptors_are_shares_of_the_neighbours() {
+        // Points on a line 0.1 m apart, tangent along it, and one far away.
+        let mut pts: [[f32; 2]; 12] = [[0.0; 2]; 12];
+        for (k, p) in pts.iter_mut().enumerate().take(11) {
+            *p = [0.1 * k as f32, 0.0];
+        }
+        pts[11] = [50.0, 50.0];
+        let tan = [[1.0f32, 0.0]; 12];
+        let mut out = [0 as DescBin; 12 * DESC_LEN];
+        descriptors(&pts, &tan, 2.0, &mut out);
+        let row = |i: usize| &out[i * DESC_LEN..(i + 1) * DESC_LEN];
+        for i in 0..11 {
+            let sum: u32 = row(i).iter().map(|&v| v as u32).sum();
+            assert!(
+                sum.abs_diff(DESC_SCALE) <= DESC_LEN as u32 / 2,
+                "row {i} sums {sum}"
+            );
+        }
+        // The first point sees all 10 others straight ahead (bin 4), within
+        // 0.5 m (rho bin 0: 4 of them) and 0.5-1.0 m (rho bin 1: 5), 1.0 m
+        // (rho bin 2: 1).
+        let r0 = row(0);
+        assert_eq!(r0[4] as u32, (4 * DESC_SCALE + 5) / 10);
+        assert_eq!(r0[DESC_THETA + 4] as u32, (5 * DESC_SCALE + 5) / 10);
+        assert_eq!(r0[2 * DESC_THETA + 4] as u32, (DESC_SCALE + 5) / 10);
+        // The last point sees them behind it (bin 0); the lone point nothing.
+        assert!(row(10)[0] > 0 && row(10)[4] == 0);
+        assert!(row(11).iter().all(|&v| v == 0));
+        // Disjoint rows are as far apart as descriptors get (to rounding).
+        let far = desc_distance(
+            row(0).try_into().expect("a row"),
+            row(10).try_into().expect("a row"),
+        );
+        assert!(far.abs_diff(2 * DESC_SCALE) <= DESC_LEN as u32, "{far}");
+    }
+
+    #[test]
+    fn tentative_keeps_the_k_closest_with_the_lower_index_on_ties() {
+        let mut q = [0 as DescBin; DESC_LEN];
+        q[0] = 100;
+        let mut r = [0 as DescBin; 4 * DESC_LEN];
+        // Distances to q: 40, 0, 40, 200.
+        r[0] = 60;
+        r[DESC_LEN] = 100;
+        r[2 * DESC_LEN] = 140;
+        r[3 * DESC_LEN + 5] = 100;
+        let mut out = [[0u16; 2]; 4];
+        assert_eq!(tentative(1, 4, 2, &q, &r, &mut out), 2);
+        assert_eq!(&out[..2], &[[0, 1], [0, 0]]);
+        assert_eq!(tentative(1, 4, 3, &q, &r, &mut out), 3);
+        assert_eq!(out[2], [0, 2]);
+    }
+
+    #[test]
+    fn pair_deformation_rejects_exactly_the_pairs_whose_lengths_differ() {
+        // The test without square roots must keep every pair the plain
+        // |lq - lr| < dev test keeps, and give the plain formula's values.
+        let mut g = Gen(11);
+        let dev = 0.3;
+        let (mut kept, mut rejected) = (0, 0);
+        for _ in 0..20000 {
+            let mut p = || [g.range(-5.0, 5.0), g.range(-5.0, 5.0)];
+            let (q, r) = ([p(), p()], [p(), p()]);
+            let mut unit = |_| {
+                let a = g.range(-PI, PI);
+                [libm::cosf(a), libm::sinf(a)]
+            };
+            let (qt, rt) = ([unit(0), unit(1)], [unit(2), unit(3)]);
+            // Half the time make the reference pair the input pair moved, so
+            // many pairs pass.
+            let r = if g.range(0.0, 1.0) < 0.5 {
+                let s = g.range(-0.4, 0.4);
+                [
+                    r[0],
+                    [
+                        r[0][0] + (q[1][0] - q[0][0]) * (1.0 + s * 0.1),
+                        r[0][1] + (q[1][1] - q[0][1]),
+                    ],
+                ]
+            } else {
+                r
+            };
+            let lq = libm::sqrtf(dist2(q[0], q[1]));
+            let lr = libm::sqrtf(dist2(r[0], r[1]));
+            let got = pair_deformation(&q, &qt, &r, &rt, [0, 0], [1, 1], dev);
+            if libm::fabsf(lq - lr) < dev * 0.999 {
+                let (drho, dth2) = got.expect("a pair with close lengths is kept");
+                assert!(libm::fabsf(drho - (lq - lr)) < 1e-4);
+                let dq = [q[1][0] - q[0][0], q[1][1] - q[0][1]];
+                let dr = [r[1][0] - r[0][0], r[1][1] - r[0][1]];
+                let ang = |u: [f32; 2], d: [f32; 2]| {
+                    crate::math::atan2(u[0] * d[1] - u[1] * d[0], u[0] * d[0] + u[1] * d[1])
+                };
+                let a1 = ang(qt[0], dq) - ang(rt[0], dr);
+                let a2 = ang(qt[1], [-dq[0], -dq[1]]) - ang(rt[1], [-dr[0], -dr[1]]);
+                let want = 2.0 - libm::cosf(a1) - libm::cosf(a2);
+                assert!(libm::fabsf(dth2 - want) < 1e-3, "{dth2} vs {want}");
+                kept += 1;
+            } else if libm::fabsf(lq - lr) > dev * 1.001 {
+                assert!(got.is_none());
+                rejected += 1;
+            }
+        }
+        assert!(
+            kept > 1000 && rejected > 1000,
+            "{kept} kept, {rejected} rejected"
+        );
+        // A correspondence pair that shares a point conflicts.
+        let pts = [[0.0f32, 0.0], [1.0, 0.0]];
+        let tan = [[1.0f32, 0.0]; 2];
+        assert!(pair_deformation(&pts, &tan, &pts, &tan, [0, 0], [0, 1], dev).is_none());
+        assert!(pair_deformation(&pts, &tan, &pts, &tan, [0, 0], [1, 1], dev).is_some());
+    }
 }

@@ -613,7 +613,10 @@ fn ransac_match_recovers_a_rigid_transform_from_exact_correspondences() {
     let mut rng = Prng::new(3);
     let np = p.prep.max_points as usize;
     let tent = np * p.ssm.tentative_k as usize;
-    let (mut qdesc, mut rdesc) = (vec![0f32; np * DESC_LEN], vec![0f32; np * DESC_LEN]);
+    let (mut qdesc, mut rdesc) = (
+        vec![0 as ssm::DescBin; np * DESC_LEN],
+        vec![0 as ssm::DescBin; np * DESC_LEN],
+    );
     let mut tbuf = vec![[0u16; 2]; tent];
     let mut aff = vec![Affinity::default(); AFFINITY_CAP];
     let (mut x, mut y, mut order) = (vec![0f32; tent], vec![0f32; tent], vec![0u16; tent]);

@@ -61,8 +61,8 @@ pub fn fit_weights(
     let mut qt = vec![[0f32; 2]; p];
     let mut rp = vec![[0f32; 2]; p];
     let mut rt = vec![[0f32; 2]; p];
-    let mut qd = vec![0f32; p * DESC_LEN];
-    let mut rd = vec![0f32; p * DESC_LEN];
+    let mut qd = vec![0 as ssm::DescBin; p * DESC_LEN];
+    let mut rd = vec![0 as ssm::DescBin; p * DESC_LEN];
     let mut tent = vec![[0u16; 2]; p * params.ssm.tentative_k as usize];
     let mut xs: Vec<[f32; 2]> = Vec::new();
     let mut ys: Vec<f32> = Vec::new();

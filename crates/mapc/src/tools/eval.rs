@@ -711,7 +711,10 @@ pub fn ssm_match_pair<D: AsRef<[u8]>>(db: &RefDb<D>, pair: &E1Pair) -> E1Trial {
     let nq = prep::prepare(q, true, params, &mut qp, &mut qt);
     let nr = prep::prepare(ref_pts, true, params, &mut rp, &mut rt);
     let nl = np * params.ssm.tentative_k as usize;
-    let (mut qd, mut rd) = (vec![0f32; np * DESC_LEN], vec![0f32; np * DESC_LEN]);
+    let (mut qd, mut rd) = (
+        vec![0 as ssm::DescBin; np * DESC_LEN],
+        vec![0 as ssm::DescBin; np * DESC_LEN],
+    );
     ssm::descriptors(&qp[..nq], &qt[..nq], params.ssm.desc_radius, &mut qd);
     ssm::descriptors(&rp[..nr], &rt[..nr], params.ssm.desc_radius, &mut rd);
     let (mut tent, mut aff) = (
