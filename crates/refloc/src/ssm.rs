@@ -270,10 +270,18 @@ pub fn match_scans(
         for v in y.iter_mut() {
             *v = 0.0;
         }
-        for e in aff {
-            let (a, b) = (e.a as usize, e.b as usize);
-            y[a] += e.g * x[b];
-            y[b] += e.g * x[a];
+        // The entries come in runs of equal `a` (the affinity loop's outer
+        // index), so y[a] is summed in a register over its run.
+        for run in aff.chunk_by(|e, f| e.a == f.a) {
+            let a = run[0].a as usize;
+            let xa = x[a];
+            let mut ya = 0.0f32;
+            for e in run {
+                let b = e.b as usize;
+                ya += e.g * x[b];
+                y[b] += e.g * xa;
+            }
+            y[a] += ya;
         }
         let n = libm::sqrtf(y.iter().map(|v| v * v).sum::<f32>());
         if !(n > 0.0) {
