@@ -20,6 +20,10 @@ class BuildError(Exception):
     """A map that cannot be compiled."""
 
 _Ranges = Union[npt.NDArray[np.float32], npt.NDArray[np.float64], Sequence[float]]
+# A prior region (m, map frame): a circle (x, y, radius), or a polygon of 3 to
+# 32 (x, y) vertices.
+_Region = Union[Tuple[float, float, float], Sequence[Tuple[float, float]],
+                Sequence[Sequence[float]], npt.NDArray[np.floating]]
 
 class Hypothesis:
     """One distinct pose hypothesis."""
@@ -65,7 +69,7 @@ class RefDb:
         """Bytes of scratch memory a scan of `beams` beams needs."""
     def localize(self, ranges: _Ranges, angle_min: float, angle_increment: float,
                  range_min: float = 0.0, range_max: float = 30.0,
-                 region: Optional[Tuple[float, float, float]] = None,
+                 region: Optional[_Region] = None,
                  heading: Optional[Tuple[float, float]] = None) -> Localization:
         """Localizes one scan (see Localizer.localize); allocates its scratch per call."""
     def simulate_scan(self, x: float, y: float, theta: float, beams: int = 360,
@@ -78,15 +82,17 @@ class Localizer:
     def __init__(self, db: RefDb, max_beams: int = 2048) -> None: ...
     def localize(self, ranges: _Ranges, angle_min: float, angle_increment: float,
                  range_min: float = 0.0, range_max: float = 30.0,
-                 region: Optional[Tuple[float, float, float]] = None,
+                 region: Optional[_Region] = None,
                  heading: Optional[Tuple[float, float]] = None) -> Localization:
         """Localizes one scan: ranges (m; inf or nan for no return) of beams at
         angle_min + k * angle_increment (rad, sensor frame, counter-clockwise),
         as in sensor_msgs/LaserScan. A contiguous float32 array is read in place;
         anything else is converted. The GIL is released while localizing.
-        Priors: region=(x, y, radius) (m, map frame) and heading=(theta,
-        tolerance) (rad, map frame); sites and poses outside them are not
-        considered. Raises LocalizeError when the scan cannot be localized,
+        Priors: region=(x, y, radius) (m, map frame), a circle, or
+        region=[(x1, y1), (x2, y2), ...] (m, map frame; 3 to 32 vertices, a
+        sequence of pairs or an N x 2 array), a polygon (edges included, the
+        last vertex joins the first), and heading=(theta, tolerance) (rad,
+        map frame); sites and poses outside them are not considered. Raises LocalizeError when the scan cannot be localized,
         ValueError for a prior that makes no sense."""
 
 class WhichMap:

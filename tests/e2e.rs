@@ -391,6 +391,92 @@ fn localize_against_several_maps_says_which_map() {
 }
 
 #[test]
+fn localize_with_a_polygon_prior() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = built(dir.path(), &[]);
+    let db = db.to_str().unwrap();
+    let (poses, lines) = common::jsonl_scans(&std::fs::read(db).unwrap(), 4, 9);
+    let input = dir.path().join("scans.jsonl");
+    std::fs::write(&input, lines).unwrap();
+    let input = input.to_str().unwrap();
+    let run = |extra: &[&str]| {
+        let mut args = vec!["localize", db, input, "--no-candidates"];
+        args.extend_from_slice(extra);
+        mapc(&args, dir.path())
+    };
+    let answers = |o: &Output| -> Vec<serde_json::Value> {
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect()
+    };
+    // A square of 4 m around the first pose: that scan is localized there.
+    let p = poses[0];
+    let square = |cx: f32, cy: f32| {
+        let v = [(-2.0, -2.0), (2.0, -2.0), (2.0, 2.0), (-2.0, 2.0)];
+        v.map(|(dx, dy)| format!("{},{}", cx + dx, cy + dy))
+            .join(",")
+    };
+    let o = run(&["--prior-polygon", &square(p.x, p.y)]);
+    let first = &answers(&o)[0];
+    assert_eq!(first["accepted"], true, "{first}");
+    let (x, y) = (first["x"].as_f64().unwrap(), first["y"].as_f64().unwrap());
+    assert!((x - p.x as f64).hypot(y - p.y as f64) < 0.1, "{first}");
+    // With a heading window too (a negative value is a value).
+    let o = run(&[
+        "--prior-polygon",
+        &square(p.x, p.y),
+        "--prior-heading",
+        "-180,180",
+    ]);
+    assert_eq!(answers(&o)[0]["accepted"], true, "{}", text(&o));
+    // A square far from every site ranks none: no answer, which is a
+    // reason, not a failure.
+    let o = run(&["--prior-polygon", &square(p.x + 500.0, p.y + 500.0)]);
+    assert!(o.status.success(), "{}", text(&o));
+    for r in answers(&o) {
+        assert_eq!(r["accepted"], false, "{r}");
+        assert!(r["reason"].as_str().unwrap().contains("0 examined"), "{r}");
+    }
+    // Bad polygons are clap errors (exit 2) that say why.
+    let many = (0..33)
+        .map(|k| format!("{k},{}", k * k))
+        .collect::<Vec<_>>()
+        .join(",");
+    for (bad, why) in [
+        ("0,0,1,0,1", "x, y pairs, got 5 numbers"),
+        ("0,0,1,0", "at least 3 vertices, got 2"),
+        (many.as_str(), "at most 32 vertices, got 33"),
+        ("0,0,1,1,2,2", "on one line"),
+        ("0,0,1,x,0,1", "is not a number"),
+    ] {
+        let o = run(&["--prior-polygon", bad]);
+        assert_eq!(o.status.code(), Some(2), "{bad}: {}", text(&o));
+        assert!(text(&o).contains(why), "{bad}: {}", text(&o));
+        assert!(text(&o).contains("--prior-polygon"), "{}", text(&o));
+        assert!(o.stdout.is_empty());
+    }
+    // One region: not with --prior.
+    let o = run(&["--prior-polygon", &square(p.x, p.y), "--prior", "1,1,5"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("cannot be used with"), "{}", text(&o));
+    // It belongs to one map.
+    let o = mapc(
+        &[
+            "localize",
+            db,
+            db,
+            input,
+            "--prior-polygon",
+            &square(p.x, p.y),
+        ],
+        dir.path(),
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("belong to one map"), "{}", text(&o));
+}
+
+#[test]
 fn eval_check_passes_on_own_baseline_and_fails_on_a_worse_map() {
     let dir = tempfile::tempdir().unwrap();
     let good = built(dir.path(), &[]);

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use numpy::{AllowTypeChange, PyArray1, PyArray2, PyArrayLike1, PyArrayMethods};
 use pyo3::create_exception;
-use pyo3::exceptions::{PyException, PyOSError, PyValueError};
+use pyo3::exceptions::{PyException, PyOSError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 
 create_exception!(
@@ -95,7 +95,7 @@ impl RefDb {
         angle_increment: f32,
         range_min: f32,
         range_max: f32,
-        region: Option<(f32, f32, f32)>,
+        region: Option<Region>,
         heading: Option<(f32, f32)>,
     ) -> PyResult<Localization> {
         let beams = ranges.len()?;
@@ -190,9 +190,12 @@ impl Localizer {
     /// GIL is released while localizing.
     ///
     /// Priors: `region=(x, y, radius)` (m, map frame): the robot is within
-    /// radius of (x, y); `heading=(theta, tolerance)` (rad, map frame): it
-    /// faces theta +- tolerance. Sites and poses outside them are not
-    /// considered; without them nothing changes.
+    /// radius of (x, y); or `region=[(x1, y1), (x2, y2), ...]` (m, map
+    /// frame; 3 to 32 vertices, a sequence of pairs or an N x 2 array): the
+    /// robot is inside that polygon (its edges included; the last vertex
+    /// joins the first); `heading=(theta, tolerance)` (rad, map frame): it
+    /// faces theta +- tolerance. Sites (beyond 2 m outside the region) and
+    /// poses outside them are not considered; without them nothing changes.
     #[pyo3(signature = (ranges, angle_min, angle_increment, range_min=0.0, range_max=30.0, region=None, heading=None))]
     #[allow(clippy::too_many_arguments)] // Python keyword arguments
     fn localize(
@@ -202,7 +205,7 @@ impl Localizer {
         angle_increment: f32,
         range_min: f32,
         range_max: f32,
-        region: Option<(f32, f32, f32)>,
+        region: Option<Region>,
         heading: Option<(f32, f32)>,
     ) -> PyResult<Localization> {
         let prior = make_prior(region, heading)?;
@@ -419,13 +422,43 @@ fn range_scan(
     })
 }
 
-/// The runtime's prior of `region=(x, y, radius)` and `heading=(theta,
-/// tolerance)`; `None` when neither is given.
+/// `region=`: a circle `(x, y, radius)` or a polygon, a sequence of at
+/// least 3 `(x, y)` vertices (m, map frame).
+#[derive(Debug)]
+enum Region {
+    Circle(f32, f32, f32),
+    Polygon(Vec<[f32; 2]>),
+}
+
+impl<'py> FromPyObject<'_, 'py> for Region {
+    type Error = PyErr;
+
+    fn extract(obj: Borrowed<'_, 'py, PyAny>) -> PyResult<Self> {
+        if let Ok((x, y, r)) = obj.extract::<(f32, f32, f32)>() {
+            return Ok(Region::Circle(x, y, r));
+        }
+        if let Ok(v) = obj.extract::<Vec<[f32; 2]>>() {
+            return Ok(Region::Polygon(v));
+        }
+        Err(PyTypeError::new_err(
+            "region is (x, y, radius) or a sequence of at least 3 (x, y) vertices (m, map frame)",
+        ))
+    }
+}
+
+/// The runtime's prior of `region=` (a circle or a polygon) and
+/// `heading=(theta, tolerance)` (see `Localizer.localize`), checked.
 fn make_prior(
-    region: Option<(f32, f32, f32)>,
+    region: Option<Region>,
     heading: Option<(f32, f32)>,
 ) -> PyResult<Option<refloc::Prior>> {
-    let mut prior = region.map(|(x, y, r)| refloc::Prior::circle(x, y, r));
+    let mut prior = match &region {
+        None => None,
+        Some(Region::Circle(x, y, r)) => Some(refloc::Prior::circle(*x, *y, *r)),
+        Some(Region::Polygon(v)) => Some(
+            refloc::Prior::polygon(v).map_err(|e| PyValueError::new_err(format!("region: {e}")))?,
+        ),
+    };
     if let Some((theta, tol)) = heading {
         prior = Some(
             prior

@@ -117,12 +117,21 @@ def test_quickstart_example_runs():
     assert "reference sites" in out and "Localization(" in out
 
 
-def test_priors_narrow_the_search(db_path):
+@pytest.fixture
+def site_scan(db_path):
+    """A localizer on the office map and a simulated scan at reference site
+    5, heading 0.4 rad: (db, loc, x, y, theta, ranges, angle_min,
+    angle_increment)."""
     db = refloc.RefDb(db_path)
     loc = refloc.Localizer(db, max_beams=1024)
     x, y = db.site_position(5)
     th = 0.4
     ranges, amin, inc = db.simulate_scan(x, y, th, beams=360)
+    return db, loc, x, y, th, ranges, amin, inc
+
+
+def test_priors_narrow_the_search(site_scan):
+    db, loc, x, y, th, ranges, amin, inc = site_scan
     free = loc.localize(ranges, amin, inc)
     near = loc.localize(ranges, amin, inc, region=(x + 1.0, y, 5.0), heading=(th, math.radians(30)))
     assert free.accepted and near.accepted and math.hypot(near.x - x, near.y - y) < 0.3
@@ -143,6 +152,38 @@ def test_priors_narrow_the_search(db_path):
         loc.localize(ranges, amin, inc, region=(x, y, -1.0))
     with pytest.raises(ValueError):
         db.localize(ranges, amin, inc, heading=(math.nan, 0.1))
+
+
+def test_a_polygon_region_narrows_the_search(site_scan):
+    _, loc, x, y, th, ranges, amin, inc = site_scan
+    # A concave L around the true pose (its notch away from it), as pairs
+    # and as an N x 2 array: the true pose.
+    ell = [(x - 2.0, y - 2.0), (x + 3.0, y - 2.0), (x + 3.0, y + 1.0),
+           (x + 1.0, y + 1.0), (x + 1.0, y + 3.0), (x - 2.0, y + 3.0)]
+    for region in (ell, np.array(ell), [list(v) for v in ell]):
+        r = loc.localize(ranges, amin, inc, region=region, heading=(th, math.radians(30)))
+        assert r.accepted and math.hypot(r.x - x, r.y - y) < 0.3, region
+    # The same L moved so that the true pose is in its notch: whatever is
+    # answered is not the true pose.
+    notch = [(vx - 2.0, vy - 2.0) for vx, vy in ell]
+    try:
+        r = loc.localize(ranges, amin, inc, region=notch)
+        assert math.hypot(r.x - x, r.y - y) > 0.3 or not r.accepted
+    except refloc.LocalizeError:
+        pass
+    far = [(x + 500.0, y + 500.0), (x + 501.0, y + 500.0), (x + 500.0, y + 501.0)]
+    with pytest.raises(refloc.LocalizeError):
+        loc.localize(ranges, amin, inc, region=far)
+    # Bad polygons are ValueErrors that say why; other shapes TypeErrors.
+    for bad, why in (([(0.0, 0.0), (1.0, 0.0)], "at least 3"),
+                     ([(0.0, 0.0), (1.0, math.nan), (0.0, 1.0)], "not finite"),
+                     ([(0.0, 0.0), (1.0, 1.0), (2.0, 2.0)], "one line"),
+                     ([(float(k), float(k * k)) for k in range(33)], "at most 32")):
+        with pytest.raises(ValueError, match=why):
+            loc.localize(ranges, amin, inc, region=bad)
+    for bad in ([1.0, 2.0, 3.0], "abc", [(0.0, 0.0, 0.0)] * 3):
+        with pytest.raises(TypeError):
+            loc.localize(ranges, amin, inc, region=bad)
 
 
 @pytest.fixture(scope="module")

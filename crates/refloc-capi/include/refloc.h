@@ -33,6 +33,11 @@
 #define REFLOC_DB_BYTES_ALIGN 16
 
 /*
+ Most vertices of a prior polygon ([`refloc_localize_ranges_polygon`]).
+ */
+#define REFLOC_MAX_POLYGON_VERTICES 32
+
+/*
  Status codes: `REFLOC_OK` (0) or an error. [`refloc_strerror`] names them.
  */
 enum refloc_status
@@ -112,6 +117,12 @@ enum refloc_status
      positive, negative tolerance).
      */
     REFLOC_ERR_BAD_PRIOR = 25,
+    /*
+     The prior polygon is unusable: fewer than 3 or more than
+     `REFLOC_MAX_POLYGON_VERTICES` vertices, a non-finite coordinate, or
+     all vertices on one line.
+     */
+    REFLOC_ERR_BAD_POLYGON = 26,
     /*
      An error this version of the C ABI does not know.
      */
@@ -309,7 +320,8 @@ typedef struct refloc_result {
  [`refloc_localize_ranges_prior`]: within `radius` m of (`x`, `y`) (map
  frame; `INFINITY` for anywhere), facing `heading` +- `heading_tolerance`
  rad (a tolerance of pi or more for any heading). Sites and poses outside
- it are not considered.
+ it are not considered. For a polygon region instead of the circle, see
+ [`refloc_localize_ranges_polygon`].
  */
 typedef struct refloc_prior {
     /*
@@ -440,6 +452,38 @@ refloc_status refloc_localize_ranges_prior(const struct refloc_db *db,
                                            uint8_t *scratch,
                                            size_t scratch_len,
                                            struct refloc_result *out_result);
+
+/*
+ As [`refloc_localize_ranges_prior`], with a polygon region: the robot
+ is inside (or on the edge of) the polygon of `polygon_len` vertices
+ whose coordinates `polygon_xy` holds as x0, y0, x1, y1, ... (m, map
+ frame; either direction around, the last vertex joins the first; for a
+ self-intersecting outline the even-odd rule decides what is inside).
+ Sites farther than 2 m outside it are not ranked. `prior` is NULL (any
+ heading) or gives the heading window; its `radius` must then be
+ `INFINITY` (one region: the polygon), else `REFLOC_ERR_BAD_PRIOR`.
+ A polygon of fewer than 3 or more than `REFLOC_MAX_POLYGON_VERTICES`
+ vertices, with a non-finite coordinate or with all vertices on one line
+ is `REFLOC_ERR_BAD_POLYGON`; `polygon_xy` NULL with `polygon_len` > 0
+ is `REFLOC_ERR_NULL`.
+
+ # Safety
+ As [`refloc_localize_ranges_prior`]; `polygon_xy` is NULL or points to
+ `2 * polygon_len` readable floats (or `polygon_len` is 0).
+ */
+refloc_status refloc_localize_ranges_polygon(const struct refloc_db *db,
+                                             float angle_min,
+                                             float angle_increment,
+                                             float range_min,
+                                             float range_max,
+                                             const float *ranges,
+                                             size_t n,
+                                             const float *polygon_xy,
+                                             size_t polygon_len,
+                                             const struct refloc_prior *prior,
+                                             uint8_t *scratch,
+                                             size_t scratch_len,
+                                             struct refloc_result *out_result);
 
 /*
  Localizes one scan given as `n` points in the sensor frame (`points` =

@@ -41,8 +41,8 @@ use core::ffi::c_char;
 use core::mem::{align_of, size_of};
 
 use refloc::{
-    localize_with_prior, scratch_size, DbErrorKind, Localization, LocalizeError, Prior, RangeScan,
-    RefDb, Scan,
+    localize_with_prior, scratch_size, DbErrorKind, Localization, LocalizeError, Polygon, Prior,
+    RangeScan, RefDb, Scan,
 };
 
 /// Bytes of a [`refloc_db`] handle (an ABI constant: it changes only with
@@ -54,6 +54,8 @@ pub const REFLOC_DB_ALIGN: usize = 8;
 pub const REFLOC_DB_WORDS: usize = REFLOC_DB_SIZE / 8;
 /// Alignment the `.refdb` bytes must have in memory.
 pub const REFLOC_DB_BYTES_ALIGN: usize = 16;
+/// Most vertices of a prior polygon ([`refloc_localize_ranges_polygon`]).
+pub const REFLOC_MAX_POLYGON_VERTICES: usize = 32;
 
 /// An opened map. Declare one (stack, static, or memory you manage), fill
 /// it with [`refloc_db_open`], and pass its address to the other
@@ -106,6 +108,10 @@ pub enum refloc_status {
     /// The prior makes no sense (non-finite centre or heading, radius not
     /// positive, negative tolerance).
     REFLOC_ERR_BAD_PRIOR = 25,
+    /// The prior polygon is unusable: fewer than 3 or more than
+    /// `REFLOC_MAX_POLYGON_VERTICES` vertices, a non-finite coordinate, or
+    /// all vertices on one line.
+    REFLOC_ERR_BAD_POLYGON = 26,
     /// An error this version of the C ABI does not know.
     REFLOC_ERR_UNKNOWN = 99,
 }
@@ -142,7 +148,8 @@ pub struct refloc_db_info {
 /// [`refloc_localize_ranges_prior`]: within `radius` m of (`x`, `y`) (map
 /// frame; `INFINITY` for anywhere), facing `heading` +- `heading_tolerance`
 /// rad (a tolerance of pi or more for any heading). Sites and poses outside
-/// it are not considered.
+/// it are not considered. For a polygon region instead of the circle, see
+/// [`refloc_localize_ranges_polygon`].
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct refloc_prior {
@@ -243,6 +250,7 @@ const _: () = assert!(align_of::<Handle>() <= REFLOC_DB_ALIGN);
 const _: () = assert!(align_of::<refloc_db>() == REFLOC_DB_ALIGN);
 const _: () = assert!(size_of::<refloc_result>() == 188);
 const _: () = assert!(size_of::<refloc_hypothesis>() == 16);
+const _: () = assert!(REFLOC_MAX_POLYGON_VERTICES == refloc::prior::MAX_POLYGON_VERTICES);
 
 fn db_status(kind: DbErrorKind) -> refloc_status {
     match kind {
@@ -463,7 +471,7 @@ fn fill(out: &mut refloc_result, fix: &Localization<'_>) {
 unsafe fn run(
     db: *const refloc_db,
     scan: impl FnOnce() -> Result<Scan<'static>, refloc_status>,
-    prior: Option<Prior>,
+    prior: impl FnOnce() -> Result<Option<Prior>, refloc_status>,
     scratch: *mut u8,
     scratch_len: usize,
     out_result: *mut refloc_result,
@@ -492,9 +500,11 @@ unsafe fn run(
     // SAFETY: `scratch_len` writable bytes that nothing else uses during
     // the call (caller's contract); u8 needs no alignment.
     let scratch = unsafe { core::slice::from_raw_parts_mut(scratch, scratch_len) };
-    if prior.is_some_and(|p| !p.is_valid()) {
-        return REFLOC_ERR_BAD_PRIOR;
-    }
+    let prior = match prior() {
+        Ok(p) if p.is_some_and(|p| !p.is_valid()) => return REFLOC_ERR_BAD_PRIOR,
+        Ok(p) => p,
+        Err(s) => return s,
+    };
     match localize_with_prior(&h.db, &scan, scratch, prior) {
         Ok(fix) => {
             fill(out, &fix);
@@ -589,21 +599,40 @@ pub unsafe extern "C" fn refloc_localize_ranges_prior(
     scratch_len: usize,
     out_result: *mut refloc_result,
 ) -> refloc_status {
-    let prior = if prior.is_null() {
-        None
-    } else if (prior as usize) % align_of::<refloc_prior>() != 0 {
-        return REFLOC_ERR_ALIGNMENT;
-    } else {
-        // SAFETY: non-null, aligned, readable (caller's contract).
-        let p = unsafe { *prior };
-        Some(Prior {
-            x: p.x,
-            y: p.y,
-            radius: p.radius,
-            heading: p.heading,
-            heading_tolerance: p.heading_tolerance,
-        })
-    };
+    // SAFETY: the caller's contract.
+    let read = || unsafe { read_prior(prior) };
+    // SAFETY: the caller's contract.
+    unsafe {
+        run_ranges(
+            db,
+            [angle_min, angle_increment, range_min, range_max],
+            ranges,
+            n,
+            read,
+            scratch,
+            scratch_len,
+            out_result,
+        )
+    }
+}
+
+/// Shared tail of the ranges entry points: the scan geometry is
+/// `[angle_min, angle_increment, range_min, range_max]`.
+///
+/// # Safety
+/// The pointers satisfy the contracts of the public functions.
+#[allow(clippy::too_many_arguments)]
+unsafe fn run_ranges(
+    db: *const refloc_db,
+    geometry: [f32; 4],
+    ranges: *const f32,
+    n: usize,
+    prior: impl FnOnce() -> Result<Option<Prior>, refloc_status>,
+    scratch: *mut u8,
+    scratch_len: usize,
+    out_result: *mut refloc_result,
+) -> refloc_status {
+    let [angle_min, angle_increment, range_min, range_max] = geometry;
     let scan = || {
         // SAFETY: the caller's contract; the slice lives through the call.
         let ranges = unsafe { floats(ranges, n) }?;
@@ -617,6 +646,90 @@ pub unsafe extern "C" fn refloc_localize_ranges_prior(
     };
     // SAFETY: the caller's contract.
     unsafe { run(db, scan, prior, scratch, scratch_len, out_result) }
+}
+
+/// The caller's `refloc_prior` as a runtime prior (NULL: none).
+///
+/// # Safety
+/// `prior` is NULL or points to a readable `refloc_prior`.
+unsafe fn read_prior(prior: *const refloc_prior) -> Result<Option<Prior>, refloc_status> {
+    if prior.is_null() {
+        return Ok(None);
+    }
+    if (prior as usize) % align_of::<refloc_prior>() != 0 {
+        return Err(REFLOC_ERR_ALIGNMENT);
+    }
+    // SAFETY: non-null, aligned, readable (caller's contract).
+    let p = unsafe { *prior };
+    Ok(Some(Prior {
+        x: p.x,
+        y: p.y,
+        radius: p.radius,
+        ..Prior::NONE.with_heading(p.heading, p.heading_tolerance)
+    }))
+}
+
+/// As [`refloc_localize_ranges_prior`], with a polygon region: the robot
+/// is inside (or on the edge of) the polygon of `polygon_len` vertices
+/// whose coordinates `polygon_xy` holds as x0, y0, x1, y1, ... (m, map
+/// frame; either direction around, the last vertex joins the first; for a
+/// self-intersecting outline the even-odd rule decides what is inside).
+/// Sites farther than 2 m outside it are not ranked. `prior` is NULL (any
+/// heading) or gives the heading window; its `radius` must then be
+/// `INFINITY` (one region: the polygon), else `REFLOC_ERR_BAD_PRIOR`.
+/// A polygon of fewer than 3 or more than `REFLOC_MAX_POLYGON_VERTICES`
+/// vertices, with a non-finite coordinate or with all vertices on one line
+/// is `REFLOC_ERR_BAD_POLYGON`; `polygon_xy` NULL with `polygon_len` > 0
+/// is `REFLOC_ERR_NULL`.
+///
+/// # Safety
+/// As [`refloc_localize_ranges_prior`]; `polygon_xy` is NULL or points to
+/// `2 * polygon_len` readable floats (or `polygon_len` is 0).
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn refloc_localize_ranges_polygon(
+    db: *const refloc_db,
+    angle_min: f32,
+    angle_increment: f32,
+    range_min: f32,
+    range_max: f32,
+    ranges: *const f32,
+    n: usize,
+    polygon_xy: *const f32,
+    polygon_len: usize,
+    prior: *const refloc_prior,
+    scratch: *mut u8,
+    scratch_len: usize,
+    out_result: *mut refloc_result,
+) -> refloc_status {
+    let read = || {
+        // Checked before the length is doubled, which cannot overflow then.
+        if polygon_len > REFLOC_MAX_POLYGON_VERTICES {
+            return Err(REFLOC_ERR_BAD_POLYGON);
+        }
+        // SAFETY: the caller's contract.
+        let xy = unsafe { floats(polygon_xy, 2 * polygon_len) }?;
+        let polygon = Polygon::from_flat(xy).map_err(|_| REFLOC_ERR_BAD_POLYGON)?;
+        // SAFETY: the caller's contract.
+        let p = unsafe { read_prior(prior) }?.unwrap_or(Prior::NONE);
+        Ok(Some(Prior {
+            polygon: Some(polygon),
+            ..p
+        }))
+    };
+    // SAFETY: the caller's contract.
+    unsafe {
+        run_ranges(
+            db,
+            [angle_min, angle_increment, range_min, range_max],
+            ranges,
+            n,
+            read,
+            scratch,
+            scratch_len,
+            out_result,
+        )
+    }
 }
 
 /// Localizes one scan given as `n` points in the sensor frame (`points` =
@@ -652,7 +765,7 @@ pub unsafe extern "C" fn refloc_localize_points(
         Ok(Scan::Points { points, range_max })
     };
     // SAFETY: the caller's contract.
-    unsafe { run(db, scan, None, scratch, scratch_len, out_result) }
+    unsafe { run(db, scan, || Ok(None), scratch, scratch_len, out_result) }
 }
 
 /// A static, NUL-terminated English description of a status code (never
@@ -676,7 +789,8 @@ pub extern "C" fn refloc_strerror(status: i32) -> *const c_char {
         22 => c"unusable scan geometry (angles or range limits)",
         23 => c"too few valid returns in the scan",
         24 => c"no candidate site matched the scan",
-        25 => c"unusable prior (finite x, y, heading; radius > 0 or INFINITY; tolerance >= 0)",
+        25 => c"unusable prior (finite x, y, heading; radius > 0 or INFINITY, INFINITY with a polygon; tolerance >= 0)",
+        26 => c"unusable prior polygon (3 to REFLOC_MAX_POLYGON_VERTICES finite vertices, not all on one line)",
         99 => c"an error this version of the C ABI does not know",
         _ => c"unknown refloc status",
     };
@@ -717,6 +831,7 @@ mod tests {
             REFLOC_ERR_NOT_ENOUGH_POINTS,
             REFLOC_ERR_NO_MATCH,
             REFLOC_ERR_BAD_PRIOR,
+            REFLOC_ERR_BAD_POLYGON,
             REFLOC_ERR_UNKNOWN,
         ] {
             // SAFETY: refloc_strerror returns a static C string.

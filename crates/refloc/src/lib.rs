@@ -83,7 +83,7 @@ pub use params::{
     BadParam, CoarseParams, Params, PrepParams, RefineParams, SelectParams, Selection, SensorModel,
     SsmParams, VerifyParams,
 };
-pub use prior::Prior;
+pub use prior::{Polygon, PolygonError, Prior};
 
 #[cfg(test)]
 mod tests;

@@ -132,7 +132,7 @@ impl fmt::Display for LocalizeError {
             }
             LocalizeError::BadPrior => write!(
                 f,
-                "unusable prior: the centre and heading must be finite, the radius > 0 m, the heading tolerance >= 0 rad"
+                "unusable prior: the centre and heading must be finite, the radius > 0 m (infinite with a polygon), the heading tolerance >= 0 rad"
             ),
         }
     }

@@ -1302,40 +1302,88 @@ fn localize_rejects_range_min_not_below_range_max() {
     }
 }
 
-#[test]
-fn a_prior_limits_the_answer_to_its_region_and_heading_window() {
-    use crate::{localize_with_prior, Prior};
+/// Localizes the fixture's clean scan ([`truth_and_scan`]) with `prior`:
+/// the pose, whether it is accepted, the candidates examined.
+fn fixture_with_prior(prior: Option<crate::Prior>) -> Result<(Pose2, bool, usize), LocalizeError> {
     let buf = tiny_db();
     let db = RefDb::new(buf.bytes()).unwrap();
-    let (truth, ranges) = truth_and_scan();
+    let (_, ranges) = truth_and_scan();
     let mut scratch = vec![0u8; scratch_size(db.params(), ranges.len())];
-    let run = |prior: Option<Prior>, scratch: &mut [u8]| {
-        localize_with_prior(&db, &ranges_scan(&ranges), scratch, prior)
-            .map(|l| (l.pose, l.accepted, l.candidates.len()))
-    };
-    let (free, ..) = run(None, &mut scratch).unwrap();
+    crate::localize_with_prior(&db, &ranges_scan(&ranges), &mut scratch, prior)
+        .map(|l| (l.pose, l.accepted, l.candidates.len()))
+}
+
+#[test]
+fn a_prior_limits_the_answer_to_its_region_and_heading_window() {
+    use crate::Prior;
+    let (truth, _) = truth_and_scan();
+    let run = fixture_with_prior;
+    let (free, ..) = run(None).unwrap();
     // Around the truth, the right heading: the same answer.
     let near = Prior::circle(truth.x + 0.5, truth.y, 1.5).with_heading(truth.theta, 0.3);
-    let (p, accepted, _) = run(Some(near), &mut scratch).unwrap();
+    let (p, accepted, _) = run(Some(near)).unwrap();
     assert!(accepted && (p.x - free.x).abs() < 1e-4 && (p.y - free.y).abs() < 1e-4);
     // A heading window that excludes the truth: no answer is the truth.
     let wrong_heading = Prior::NONE.with_heading(truth.theta + 2.0, 0.3);
-    match run(Some(wrong_heading), &mut scratch) {
+    match run(Some(wrong_heading)) {
         Ok((p, ..)) => assert!(wrong_heading.allows(&p), "{p:?} outside the window"),
         Err(e) => assert!(matches!(e, LocalizeError::NoMatch { .. }), "{e}"),
     }
     // A region far from every site ranks none.
     let nowhere = Prior::circle(1000.0, 1000.0, 1.0);
     assert!(matches!(
-        run(Some(nowhere), &mut scratch),
+        run(Some(nowhere)),
         Err(LocalizeError::NoMatch { candidates: 0 })
     ));
     // Nonsense is refused.
     let bad = Prior::circle(0.0, 0.0, -1.0);
-    assert_eq!(
-        run(Some(bad), &mut scratch).unwrap_err(),
-        LocalizeError::BadPrior
-    );
+    assert_eq!(run(Some(bad)).unwrap_err(), LocalizeError::BadPrior);
+}
+
+#[test]
+fn a_polygon_prior_keeps_the_answer_inside_it_and_excludes_it_elsewhere() {
+    use crate::Prior;
+    let (truth, _) = truth_and_scan();
+    let run = fixture_with_prior;
+    let (free, ..) = run(None).unwrap();
+    let (x, y) = (truth.x, truth.y);
+    // A concave L around the truth (its notch on the far side): the same
+    // answer.
+    let ell = [
+        [x - 1.0, y - 1.0],
+        [x + 2.0, y - 1.0],
+        [x + 2.0, y + 0.5],
+        [x + 0.5, y + 0.5],
+        [x + 0.5, y + 2.0],
+        [x - 1.0, y + 2.0],
+    ];
+    let around = Prior::polygon(&ell).unwrap();
+    let (p, accepted, _) = run(Some(around)).unwrap();
+    assert!(accepted && (p.x - free.x).abs() < 1e-4 && (p.y - free.y).abs() < 1e-4);
+    // The same L moved so the truth sits in its notch: whatever is
+    // answered lies inside the L, so it is not the truth.
+    let notch = ell.map(|v| [v[0] - 1.5, v[1] - 1.5]);
+    let elsewhere = Prior::polygon(&notch).unwrap();
+    assert!(!elsewhere.allows(&truth));
+    match run(Some(elsewhere)) {
+        Ok((p, ..)) => {
+            assert!(elsewhere.allows(&p), "{p:?} outside the polygon");
+            assert!((p.x - x).hypot(p.y - y) > 0.2, "{p:?} is the truth");
+        }
+        Err(e) => assert!(matches!(e, LocalizeError::NoMatch { .. }), "{e}"),
+    }
+    // Far from every site: no site is ranked.
+    let far = Prior::polygon(&[[1000.0, 1000.0], [1001.0, 1000.0], [1000.0, 1001.0]]).unwrap();
+    assert!(matches!(
+        run(Some(far)),
+        Err(LocalizeError::NoMatch { candidates: 0 })
+    ));
+    // A circle and a polygon at once is refused.
+    let both = Prior {
+        radius: 2.0,
+        ..around
+    };
+    assert_eq!(run(Some(both)).unwrap_err(), LocalizeError::BadPrior);
 }
 
 #[test]

@@ -424,3 +424,90 @@ proptest! {
         }
     }
 }
+
+/// A star-shaped simple polygon: 3 to 32 vertices at increasing angles
+/// around (cx, cy), each at its own radius (0.5 to 10 m).
+fn star_polygon() -> impl Strategy<Value = Vec<[f32; 2]>> {
+    (
+        -50.0f32..50.0,
+        -50.0f32..50.0,
+        vec(
+            (0.1f32..1.0, 0.5f32..10.0),
+            3..=refloc::prior::MAX_POLYGON_VERTICES,
+        ),
+    )
+        .prop_map(|(cx, cy, steps)| {
+            let total: f32 = steps.iter().map(|s| s.0).sum();
+            let mut a = 0.0f32;
+            steps
+                .iter()
+                .map(|&(da, r)| {
+                    a += da * 2.0 * PI / total;
+                    [cx + r * a.cos(), cy + r * a.sin()]
+                })
+                .collect()
+        })
+}
+
+/// Even-odd point-in-polygon and distance to the edges, in f64.
+fn inside_f64(v: &[[f32; 2]], p: [f64; 2]) -> (bool, f64) {
+    let (mut inside, mut dist) = (false, f64::INFINITY);
+    for (i, a) in v.iter().enumerate() {
+        let b = v[(i + 1) % v.len()];
+        let (ax, ay, bx, by) = (a[0] as f64, a[1] as f64, b[0] as f64, b[1] as f64);
+        if (ay > p[1]) != (by > p[1]) && p[0] < ax + (p[1] - ay) * (bx - ax) / (by - ay) {
+            inside = !inside;
+        }
+        let (dx, dy) = (bx - ax, by - ay);
+        let t = (((p[0] - ax) * dx + (p[1] - ay) * dy) / (dx * dx + dy * dy)).clamp(0.0, 1.0);
+        dist = dist.min((p[0] - ax - t * dx).hypot(p[1] - ay - t * dy));
+    }
+    (inside, dist)
+}
+
+proptest! {
+    #![proptest_config(cases(256))]
+
+    /// Polygon priors never panic, whatever the numbers (NaN, infinities,
+    /// huge values, too few or too many vertices): the constructor refuses
+    /// or accepts, and an accepted polygon answers every query.
+    #[test]
+    fn polygon_priors_never_panic(
+        xy in vec(any::<f32>(), 0..80),
+        p in (any::<f32>(), any::<f32>(), any::<f32>()),
+    ) {
+        let from_flat = refloc::Polygon::from_flat(&xy);
+        let pairs: Vec<[f32; 2]> = xy.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
+        prop_assert_eq!(from_flat.is_ok(), refloc::Polygon::new(&pairs).is_ok() && xy.len() % 2 == 0);
+        if let Ok(poly) = from_flat {
+            let prior = refloc::Prior { polygon: Some(poly), ..refloc::Prior::NONE };
+            prop_assert!(prior.is_valid() && prior.has_region());
+            let _ = prior.considers_site([p.0, p.1]);
+            let _ = prior.allows(&Pose2::new(p.0, p.1, p.2));
+            let _ = poly.distance_to_boundary([p.0, p.1]);
+        }
+    }
+
+    /// On star-shaped polygons, `contains` is the even-odd rule computed in
+    /// f64 for points more than 1 mm from an edge, holds every vertex and
+    /// edge midpoint, and `distance_to_boundary` is the f64 distance.
+    #[test]
+    fn point_in_polygon_matches_an_f64_reference(
+        v in star_polygon(),
+        p in (-70.0f32..70.0, -70.0f32..70.0),
+    ) {
+        let poly = refloc::Polygon::new(&v).unwrap();
+        let (inside, dist) = inside_f64(&v, [p.0 as f64, p.1 as f64]);
+        let d = poly.distance_to_boundary([p.0, p.1]) as f64;
+        prop_assert!((d - dist).abs() <= 1e-4 + 1e-5 * dist, "distance {} vs {}", d, dist);
+        if dist > 1e-3 {
+            prop_assert_eq!(poly.contains([p.0, p.1]), inside);
+        }
+        for (i, a) in v.iter().enumerate() {
+            let b = v[(i + 1) % v.len()];
+            prop_assert!(poly.contains(*a), "vertex {:?}", a);
+            let mid = [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0];
+            prop_assert!(poly.contains(mid), "edge midpoint {:?}", mid);
+        }
+    }
+}

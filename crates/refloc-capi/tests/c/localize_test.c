@@ -251,6 +251,76 @@ int main(int argc, char **argv) {
                                               &rpr),
                  REFLOC_ERR_BAD_PRIOR, "negative prior radius");
 
+    /* A polygon prior: a square around the truth finds it; a triangle away
+     * from every site ranks none; bad polygons are typed errors. */
+    float tx = (float)s.truth[0], ty = (float)s.truth[1];
+    float square[8] = {tx - 2.0f, ty - 2.0f, tx + 3.0f, ty - 2.0f,
+                       tx + 3.0f, ty + 2.0f, tx - 2.0f, ty + 2.0f};
+    refloc_prior facing = {0.0f, 0.0f, INFINITY, (float)s.truth[2], 0.5236f};
+    check_status(refloc_localize_ranges_polygon(&db, s.angle_min, s.angle_increment, s.range_min,
+                                                s.range_max, s.ranges, s.n, square, 4, &facing,
+                                                scratch, need, &rpr),
+                 REFLOC_OK, "localize ranges in a polygon");
+    check_pose(&rpr, s.truth, "ranges in a polygon");
+    check_status(refloc_localize_ranges_polygon(&db, s.angle_min, s.angle_increment, s.range_min,
+                                                s.range_max, s.ranges, s.n, square, 4, NULL,
+                                                scratch, need, &rpr),
+                 REFLOC_OK, "polygon with no heading window");
+    check_pose(&rpr, s.truth, "ranges in a polygon, any heading");
+    float far[6] = {tx + 500.0f, ty + 500.0f, tx + 501.0f, ty + 500.0f, tx + 500.0f, ty + 501.0f};
+    check_status(refloc_localize_ranges_polygon(&db, s.angle_min, s.angle_increment, s.range_min,
+                                                s.range_max, s.ranges, s.n, far, 3, NULL, scratch,
+                                                need, &rpr),
+                 REFLOC_ERR_NO_MATCH, "polygon away from every site");
+    facing.radius = 5.0f;
+    check_status(refloc_localize_ranges_polygon(&db, s.angle_min, s.angle_increment, s.range_min,
+                                                s.range_max, s.ranges, s.n, square, 4, &facing,
+                                                scratch, need, &rpr),
+                 REFLOC_ERR_BAD_PRIOR, "a circle and a polygon at once");
+    check_status(refloc_localize_ranges_polygon(&db, s.angle_min, s.angle_increment, s.range_min,
+                                                s.range_max, s.ranges, s.n, square, 2, NULL,
+                                                scratch, need, &rpr),
+                 REFLOC_ERR_BAD_POLYGON, "2-vertex polygon");
+    check(rpr.accepted == 0 && rpr.x == 0.0f, "result zeroed on a bad polygon");
+    check_status(refloc_localize_ranges_polygon(&db, s.angle_min, s.angle_increment, s.range_min,
+                                                s.range_max, s.ranges, s.n, NULL, 0, NULL, scratch,
+                                                need, &rpr),
+                 REFLOC_ERR_BAD_POLYGON, "empty polygon");
+    check_status(refloc_localize_ranges_polygon(&db, s.angle_min, s.angle_increment, s.range_min,
+                                                s.range_max, s.ranges, s.n, NULL, 4, NULL, scratch,
+                                                need, &rpr),
+                 REFLOC_ERR_NULL, "NULL polygon");
+    float many[2 * (REFLOC_MAX_POLYGON_VERTICES + 1)];
+    for (int k = 0; k <= REFLOC_MAX_POLYGON_VERTICES; k++) {
+        float a = 6.2831853f * (float)k / (float)(REFLOC_MAX_POLYGON_VERTICES + 1);
+        many[2 * k] = tx + 3.0f * cosf(a);
+        many[2 * k + 1] = ty + 3.0f * sinf(a);
+    }
+    check_status(refloc_localize_ranges_polygon(&db, s.angle_min, s.angle_increment, s.range_min,
+                                                s.range_max, s.ranges, s.n, many,
+                                                REFLOC_MAX_POLYGON_VERTICES, NULL, scratch, need,
+                                                &rpr),
+                 REFLOC_OK, "polygon of REFLOC_MAX_POLYGON_VERTICES vertices");
+    check_status(refloc_localize_ranges_polygon(&db, s.angle_min, s.angle_increment, s.range_min,
+                                                s.range_max, s.ranges, s.n, many,
+                                                REFLOC_MAX_POLYGON_VERTICES + 1, NULL, scratch,
+                                                need, &rpr),
+                 REFLOC_ERR_BAD_POLYGON, "polygon of too many vertices");
+    check_status(refloc_localize_ranges_polygon(&db, s.angle_min, s.angle_increment, s.range_min,
+                                                s.range_max, s.ranges, s.n, many, SIZE_MAX, NULL,
+                                                scratch, need, &rpr),
+                 REFLOC_ERR_BAD_POLYGON, "polygon of SIZE_MAX vertices");
+    square[5] = NAN;
+    check_status(refloc_localize_ranges_polygon(&db, s.angle_min, s.angle_increment, s.range_min,
+                                                s.range_max, s.ranges, s.n, square, 4, NULL,
+                                                scratch, need, &rpr),
+                 REFLOC_ERR_BAD_POLYGON, "NaN vertex");
+    float flat[6] = {1.0f, 1.0f, 2.0f, 2.0f, 3.0f, 3.0f};
+    check_status(refloc_localize_ranges_polygon(&db, s.angle_min, s.angle_increment, s.range_min,
+                                                s.range_max, s.ranges, s.n, flat, 3, NULL, scratch,
+                                                need, &rpr),
+                 REFLOC_ERR_BAD_POLYGON, "vertices on one line");
+
     /* The same scan as points (x, y pairs; no return = NaN). */
     float *pts = own_malloc(2 * s.n * sizeof(float));
     if (!pts) return 2;

@@ -151,6 +151,25 @@ pub struct Args {
     /// Prior heading window: the robot faces THETA +- TOL degrees (map frame).
     #[arg(long, value_name = "THETA,TOL", allow_hyphen_values = true)]
     pub prior_heading: Option<Numbers>,
+    /// Prior region as a polygon: the robot is inside the polygon through
+    /// (X1, Y1), (X2, Y2), ... (m, map frame; 3 to 32 vertices, the last
+    /// joins the first); sites more than 2 m outside it are not ranked,
+    /// poses outside it are no answer. Instead of --prior.
+    #[arg(
+        long,
+        value_name = "X1,Y1,X2,Y2,...",
+        allow_hyphen_values = true,
+        conflicts_with = "prior",
+        value_parser = parse_polygon
+    )]
+    pub prior_polygon: Option<refloc::Polygon>,
+}
+
+/// `--prior-polygon`: comma-separated x, y pairs, checked by the runtime's
+/// rules (`refloc::Polygon::from_flat`).
+fn parse_polygon(s: &str) -> Result<refloc::Polygon, String> {
+    let Numbers(xy) = s.parse()?;
+    refloc::Polygon::from_flat(&xy).map_err(|e| e.to_string())
 }
 
 /// A comma-separated list of numbers in one argument (`--prior 1,-2,3`):
@@ -270,7 +289,8 @@ fn output_is_text(a: &Args) -> Result<bool, CliError> {
     Ok(a.format == OutputFormat::Text)
 }
 
-/// The prior `--prior` and `--prior-heading` give, checked.
+/// The prior `--prior` (or `--prior-polygon`) and `--prior-heading` give,
+/// checked.
 fn prior_of(a: &Args) -> Result<Option<refloc::Prior>, CliError> {
     for (opt, v, n) in [
         ("--prior X,Y,R", &a.prior, 3),
@@ -287,6 +307,12 @@ fn prior_of(a: &Args) -> Result<Option<refloc::Prior>, CliError> {
         .prior
         .as_ref()
         .map(|v| refloc::Prior::circle(v.0[0], v.0[1], v.0[2]));
+    if let Some(polygon) = a.prior_polygon {
+        prior = Some(refloc::Prior {
+            polygon: Some(polygon),
+            ..refloc::Prior::NONE
+        });
+    }
     if let Some(Numbers(h)) = &a.prior_heading {
         prior = Some(
             prior
@@ -316,9 +342,14 @@ fn grow_scratch(scratch: &mut Vec<u8>, params: &refloc::Params, beams: usize) {
 /// confidence (its map, pose and confidence), or no map when none accepts
 /// (`refloc::select::which_map`, the rule the Python package uses too).
 fn run_maps(a: &Args, ui: &Ui) -> CliResult {
-    if a.truth.is_some() || a.mcap.is_some() || a.prior.is_some() || a.prior_heading.is_some() {
+    if a.truth.is_some()
+        || a.mcap.is_some()
+        || a.prior.is_some()
+        || a.prior_polygon.is_some()
+        || a.prior_heading.is_some()
+    {
         return Err(input_err(anyhow::anyhow!(
-            "--truth, --mcap, --prior and --prior-heading belong to one map; give one database with them, not {}",
+            "--truth, --mcap, --prior, --prior-polygon and --prior-heading belong to one map; give one database with them, not {}",
             a.db.len()
         )));
     }
