@@ -52,7 +52,23 @@ sim() {
       > "$O/sim-$name-$e.jsonl"
   done
 }
+# dist NAME DB SEED POSES [eval options]: every class of the disturbance
+# suite (people, furniture, doors, shifted map, missing returns, range
+# noise, angular jitter, motion, mount error) localized on DB against its
+# truth, in $O/dist-NAME-CLASS.jsonl.
+dist() {
+  local name=$1 dbn=$2 seed=$3 poses=$4; shift 4
+  local d="$O/dump-dist-$name"
+  dump "dist-$name" "$dbn" "$seed" "$poses" disturbances "$@"
+  for f in "$d"/*-scans.jsonl; do
+    local e
+    e=$(basename "$f" -scans.jsonl)
+    $M localize -q "$O/$dbn.refdb" "$f" --truth "$d/$e-truth.txt" > "$O/dist-$name-$e.jsonl"
+  done
+}
 sim intel360 intel 11 300
+dist intel360 intel 11 100
+dist willow360 willow-full 12 100
 sim intel180 intel 11 300 --fov 180 --beams 361
 sim tb3 tb3-world 11 200
 sim office22 office-s22 11 200
@@ -70,9 +86,11 @@ $M localize -q "$O/office-s22.refdb" "$O/dump-office21/static-scans.jsonl" > "$O
 $M localize -q "$O/office-s32.refdb" "$O/dump-office31/static-scans.jsonl" > "$O/wrong-office31-on-32.jsonl"
 T=(real:$O/real-intel.jsonl real:$O/real-aces.jsonl)
 for n in intel360 intel180 tb3; do T+=(sim:$O/sim-$n-static.jsonl sim:$O/sim-$n-dynamic.jsonl); done
+for f in "$O"/dist-intel360-*.jsonl; do T+=(sim:$f); done
 T+=(wrong:$O/wrong-aces-on-intel.jsonl)
 H=(real:$O/real-csail.jsonl)
 for n in warehouse180 willow360 office22 office32; do H+=(sim:$O/sim-$n-static.jsonl sim:$O/sim-$n-dynamic.jsonl); done
+for f in "$O"/dist-willow360-*.jsonl; do H+=(sim:$f); done
 H+=(wrong:$O/wrong-csail-on-aces.jsonl)
 # Scans of one synthetic office on another's map: reported, not fitted on
 # (a room of one fits the same-sized room of the other, so no single-scan

@@ -128,6 +128,7 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
         let frame = &self.frame;
         let uv = frame.to_cells([sensor.x, sensor.y]);
         let max_cells = self.range_max / frame.resolution;
+        let inv_res = 1.0 / frame.resolution;
         let lim = FIT_SIGMAS * self.sigma_d;
         let inv = 1.0 / (2.0 * self.sigma_d * self.sigma_d);
         let mut m = 0.0f32;
@@ -145,7 +146,10 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
             let heading = sensor.theta + a;
             let mut through_here = false;
             let ang = frame.angle_to_cells(heading);
-            match cast(self.grid, uv[0], uv[1], ang, max_cells) {
+            // A surface farther than r + lim only makes the beam short, as
+            // no surface at all does: the cast stops a cell beyond that.
+            let reach = ((r + lim) * inv_res + 1.0).min(max_cells);
+            match cast(self.grid, uv[0], uv[1], ang, reach) {
                 Some(t) => {
                     let v = t * frame.resolution;
                     let d = libm::fabsf(v - r);
@@ -168,7 +172,7 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
                         }
                     }
                 }
-                None => short += 1,
+                None => short += 1, // no surface within reach
             }
             if through_here {
                 run += 1;
