@@ -67,6 +67,22 @@ pub const EARLY_CONFIDENCE: f32 = 0.98;
 /// is the middle.
 pub const EARLY_CONFIDENCE_MIN: usize = 6;
 
+/// The settled-answer stop: once the best answer so far has been the best
+/// over the last [`SETTLED_CANDIDATES`] examined candidates and has a
+/// confidence of at least this, the search confirms it (as after a
+/// confident match) and stops. Many right answers of real scans never reach
+/// [`EARLY_CONFIDENCE`] (on ACES two thirds), so every candidate was
+/// examined for them; a right pose found early is rarely displaced by a
+/// late candidate. Chosen on the real Intel and ACES logs by replaying
+/// full-search candidate lists (docs/performance.md, "Stopping on a settled
+/// answer"): 0.9 after 20 kept their false accepts, looser settings (0.8,
+/// or 12 candidates) added some; CSAIL, held out, checked it.
+pub const SETTLED_CONFIDENCE: f32 = 0.9;
+
+/// How many examined candidates after the best one make an answer settled
+/// ([`SETTLED_CONFIDENCE`]).
+pub const SETTLED_CANDIDATES: usize = 20;
+
 /// True when the poses of `a` and `b` are distinct alternatives (see
 /// [`DISTINCT_DISTANCE`], [`DISTINCT_HEADING`]).
 pub fn distinct(a: &Candidate, b: &Candidate) -> bool {
@@ -174,8 +190,9 @@ pub enum Next {
 /// ranks there, and the ambiguity test sees only what was examined), at
 /// most [`CONFIRM_MAX`] of them, skipping those near the best pose. With a
 /// confidence model ([`Search::with_decision`]) the best answer reaching
-/// [`EARLY_CONFIDENCE`] after [`EARLY_CONFIDENCE_MIN`] candidates starts
-/// the same confirmation.
+/// [`EARLY_CONFIDENCE`] after [`EARLY_CONFIDENCE_MIN`] candidates, or
+/// [`SETTLED_CONFIDENCE`] after staying the best over
+/// [`SETTLED_CANDIDATES`] more, starts the same confirmation.
 #[derive(Clone, Copy, Debug)]
 pub struct Search {
     selection: Selection,
@@ -278,9 +295,11 @@ impl Search {
         }
         let sure = || {
             c + 1 >= EARLY_CONFIDENCE_MIN
-                && self
-                    .best
-                    .is_some_and(|b| self.confidence(cands, b) >= EARLY_CONFIDENCE)
+                && self.best.is_some_and(|b| {
+                    let p = self.confidence(cands, b);
+                    p >= EARLY_CONFIDENCE
+                        || (c - b >= SETTLED_CANDIDATES && p >= SETTLED_CONFIDENCE)
+                })
         };
         if confident || (self.early_min > 0 && c + 1 >= self.early_min && best_ok) || sure() {
             self.floor = Some(gamma - EARLY_CONFIRM_GAMMA);
@@ -570,6 +589,54 @@ mod tests {
         // After the stop the confirmation runs as after a confident match.
         assert_eq!(with.next(0.88, [30.0, 0.0], &cands), Next::Examine);
         assert_eq!(with.next(0.8, [30.0, 0.0], &cands), Next::Stop);
+    }
+
+    #[test]
+    fn a_settled_answer_stops_after_settled_candidates() {
+        // A right-looking answer (found from four sites) below
+        // EARLY_CONFIDENCE but above SETTLED_CONFIDENCE, then candidates
+        // that land elsewhere and explain little: the search stops once
+        // SETTLED_CANDIDATES of them followed the best, not before.
+        let p = params();
+        let mut s = Search::new(&p).with_decision(Decision::DEFAULT);
+        let mut cands = vec![];
+        for k in 0..4 {
+            let mut c = cand(0.01 * k as f32, 0.0, 0.0, 64.0, 0);
+            c.spread = 0.4;
+            cands.push(c);
+            s.record(&cands, 0.9);
+        }
+        let p0 = s.confidence(&cands, 0);
+        assert!(
+            (SETTLED_CONFIDENCE..EARLY_CONFIDENCE).contains(&p0),
+            "the constructed answer's confidence {p0}"
+        );
+        // The later poses see through walls, so they are no rival.
+        let elsewhere = |k: usize| Candidate {
+            free_space_ok: 0,
+            ..cand(10.0 + 3.0 * k as f32, 5.0, 1.0, 10.0, 10)
+        };
+        for k in 0..SETTLED_CANDIDATES + 3 {
+            cands.push(elsewhere(k));
+            s.record(&cands, 0.8);
+            assert!(s.confidence(&cands, 0) >= SETTLED_CONFIDENCE);
+            let after = cands.len() - 1 - s.best().unwrap();
+            assert_eq!(s.stopping(), after >= SETTLED_CANDIDATES, "after {after}");
+            if s.stopping() {
+                break;
+            }
+        }
+        assert!(s.stopping());
+        // An answer under SETTLED_CONFIDENCE never settles.
+        let mut weak = Search::new(&p).with_decision(Decision::DEFAULT);
+        let mut c = vec![cand(0.0, 0.0, 0.0, 30.0, 0)];
+        weak.record(&c, 0.9);
+        for k in 0..2 * SETTLED_CANDIDATES {
+            c.push(elsewhere(k));
+            weak.record(&c, 0.8);
+        }
+        assert!(weak.confidence(&c, 0) < SETTLED_CONFIDENCE);
+        assert!(!weak.stopping());
     }
 
     #[test]
