@@ -415,6 +415,7 @@ fn carve<'a>(d: &Dims, ar: &mut Arena<'a>) -> Option<Bufs<'a>> {
             qdesc: ar.take(d.points * DESC_LEN)?,
             rdesc: ar.take(d.points * DESC_LEN)?,
             tent: ar.take(d.tent)?,
+            ends: ar.take(4 * d.tent)?,
             aff: ar.take(d.aff)?,
             x: ar.take(d.tent)?,
             y: ar.take(d.tent)?,

@@ -49,6 +49,9 @@ pub struct SsmWork<'a> {
     pub rdesc: &'a mut [DescBin],
     /// Tentative correspondences (input index, reference index).
     pub tent: &'a mut [[u16; 2]],
+    /// Their end points as four arrays of `tent.len()` each: input x, input
+    /// y, reference x, reference y (m), for the affinity's first test.
+    pub ends: &'a mut [f32],
     /// Sparse affinity.
     pub aff: &'a mut [Affinity],
     /// Eigenvector estimate.
@@ -223,12 +226,40 @@ pub fn match_scans(
         work.rdesc,
         work.tent,
     );
-    let nl = nl.min(work.x.len()).min(work.y.len()).min(work.order.len());
-    // 2. Sparse affinity.
+    let nl = nl
+        .min(work.x.len())
+        .min(work.y.len())
+        .min(work.order.len())
+        .min(work.ends.len() / 4)
+        .min(work.flags.len());
+    // 2. Sparse affinity. Most pairs fail the rho test; it is first run on
+    // the end points laid out as arrays (which the compiler vectorises),
+    // then the pairs that pass get the full test of `pair_deformation`,
+    // whose first step is the same comparison.
+    let (qx, rest) = work.ends.split_at_mut(nl);
+    let (qy, rest) = rest.split_at_mut(nl);
+    let (rx, rest) = rest.split_at_mut(nl);
+    let ry = &mut rest[..nl];
+    for (a, &[i, ii]) in work.tent[..nl].iter().enumerate() {
+        let (q, r) = (q_pts[i as usize], r_pts[ii as usize]);
+        (qx[a], qy[a], rx[a], ry[a]) = (q[0], q[1], r[0], r[1]);
+    }
+    let reject = &mut work.flags[..nl];
+    let dev = params.ssm.max_rho_dev;
+    let k2 = 2.0 * dev * dev;
     let mut nnz = 0usize;
     let cap = work.aff.len();
     'outer: for a in 0..nl {
-        for b in (a + 1)..nl {
+        let (qxa, qya, rxa, rya) = (qx[a], qy[a], rx[a], ry[a]);
+        let lo = a + 1;
+        let ends = qx[lo..].iter().zip(&qy[lo..]).zip(rx[lo..].iter().zip(&ry[lo..]));
+        for (m, ((&x, &y), (&u, &v))) in reject[lo..].iter_mut().zip(ends) {
+            let (dqx, dqy, drx, dry) = (x - qxa, y - qya, u - rxa, v - rya);
+            let (lq2, lr2) = (dqx * dqx + dqy * dqy, drx * drx + dry * dry);
+            let diff = lq2 - lr2;
+            *m = (diff * diff >= k2 * (lq2 + lr2)) as u8;
+        }
+        for (b, _) in reject.iter().enumerate().skip(lo).filter(|(_, &m)| m == 0) {
             let Some((drho, dth2)) = pair_deformation(
                 q_pts,
                 q_tan,
@@ -236,7 +267,7 @@ pub fn match_scans(
                 r_tan,
                 work.tent[a],
                 work.tent[b],
-                params.ssm.max_rho_dev,
+                dev,
             ) else {
                 continue;
             };

@@ -618,6 +618,7 @@ fn ransac_match_recovers_a_rigid_transform_from_exact_correspondences() {
         vec![0 as ssm::DescBin; np * DESC_LEN],
     );
     let mut tbuf = vec![[0u16; 2]; tent];
+    let mut ends = vec![0f32; 4 * tent];
     let mut aff = vec![Affinity::default(); AFFINITY_CAP];
     let (mut x, mut y, mut order) = (vec![0f32; tent], vec![0f32; tent], vec![0u16; tent]);
     let mut acc = vec![[0u16; 2]; np];
@@ -634,6 +635,7 @@ fn ransac_match_recovers_a_rigid_transform_from_exact_correspondences() {
             qdesc: &mut qdesc,
             rdesc: &mut rdesc,
             tent: &mut tbuf,
+            ends: &mut ends,
             aff: &mut aff,
             x: &mut x,
             y: &mut y,

@@ -723,10 +723,12 @@ pub fn ssm_match_pair<D: AsRef<[u8]>>(db: &RefDb<D>, pair: &E1Pair) -> E1Trial {
     );
     let (mut x, mut y, mut order) = (vec![0f32; nl], vec![0f32; nl], vec![0u16; nl]);
     let (mut acc, mut flags) = (vec![[0u16; 2]; np], vec![0u8; 3 * np + nl]);
+    let mut ends = vec![0f32; 4 * nl];
     let mut work = SsmWork {
         qdesc: &mut qd,
         rdesc: &mut rd,
         tent: &mut tent,
+        ends: &mut ends,
         aff: &mut aff,
         x: &mut x,
         y: &mut y,
