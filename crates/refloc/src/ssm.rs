@@ -177,10 +177,13 @@ pub fn descriptors(pts: &[[f32; 2]], tan: &[[f32; 2]], radius: f32, out: &mut [D
         }
         let row = &mut out[i * DESC_LEN..(i + 1) * DESC_LEN];
         for (o, &c) in row.iter_mut().zip(counts.iter()) {
-            // Rounded share; c <= total, so the result is at most DESC_SCALE
-            // (no neighbour: the row stays 0).
-            if let Some(v) = (c as u32 * DESC_SCALE + total / 2).checked_div(total) {
-                *o = v as DescBin;
+            // Rounded share; c <= total, so the result is at most DESC_SCALE.
+            // Most bins are empty and stay 0 without a division (so does a
+            // row with no neighbour).
+            if c != 0 {
+                if let Some(v) = (c as u32 * DESC_SCALE + total / 2).checked_div(total) {
+                    *o = v as DescBin;
+                }
             }
         }
     }
