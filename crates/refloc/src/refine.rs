@@ -110,27 +110,6 @@ fn floor_i64(x: f32) -> i64 {
 /// surface counts half as much as one on it.
 const ROBUST_SCALE: f32 = 0.05;
 
-/// Robust cost of `pose`: sum over points of `c^2/2 * ln(1 + (d/c)^2)`.
-fn cost(dm: &DistMap<'_>, pts: &[[f32; 2]], pose: &Pose2, max_dist: f32) -> (f32, u32) {
-    let (s, c) = (libm::sinf(pose.theta), libm::cosf(pose.theta));
-    let c2 = ROBUST_SCALE * ROBUST_SCALE;
-    let mut total = 0.0f32;
-    let mut n = 0;
-    for p in pts {
-        if !p[0].is_finite() {
-            continue;
-        }
-        let m = [pose.x + c * p[0] - s * p[1], pose.y + s * p[0] + c * p[1]];
-        let d = match dm.sample(m) {
-            Some((d, _)) if d < max_dist => d,
-            _ => max_dist,
-        };
-        total += 0.5 * c2 * libm::logf(1.0 + d * d / c2);
-        n += 1;
-    }
-    (total, n)
-}
-
 /// The robust (Cauchy-weighted) Gauss-Newton normal equations of the
 /// points' distances to the map's surfaces at `pose`.
 #[derive(Clone, Copy)]
@@ -153,8 +132,22 @@ fn normal_equations(
     pose: &Pose2,
     max_dist: f32,
 ) -> NormalEquations {
+    cost_and_normal_equations(dm, pts, pose, max_dist).1
+}
+
+/// The robust cost of `pose`, the sum over points of `c^2/2 * ln(1 +
+/// (d/c)^2)` with `d` capped at `max_dist` (a point off the map counts
+/// `max_dist`), and the normal equations there, in one pass over the
+/// points: the refinement needs both at every pose its line search accepts.
+fn cost_and_normal_equations(
+    dm: &DistMap<'_>,
+    pts: &[[f32; 2]],
+    pose: &Pose2,
+    max_dist: f32,
+) -> (f32, NormalEquations) {
     let (s, c) = (libm::sinf(pose.theta), libm::cosf(pose.theta));
     let c2 = ROBUST_SCALE * ROBUST_SCALE;
+    let mut total = 0.0f32;
     let mut ne = NormalEquations {
         h: [[0.0; 3]; 3],
         g: [0.0; 3],
@@ -167,7 +160,13 @@ fn normal_equations(
             continue;
         }
         let m = [pose.x + c * p[0] - s * p[1], pose.y + s * p[0] + c * p[1]];
-        let Some((d, grad)) = dm.sample(m) else {
+        let sample = dm.sample(m);
+        let d = match sample {
+            Some((d, _)) if d < max_dist => d,
+            _ => max_dist,
+        };
+        total += 0.5 * c2 * libm::logf(1.0 + d * d / c2);
+        let Some((d, grad)) = sample else {
             continue;
         };
         if !(d < max_dist) {
@@ -186,7 +185,7 @@ fn normal_equations(
         ne.wd2 += wgt * d * d;
         ne.n += 1;
     }
-    ne
+    (total, ne)
 }
 
 /// Refines the sensor pose `pose` (map frame) so the sensor-frame points
@@ -204,9 +203,8 @@ pub fn refine(
 ) -> (Pose2, u32) {
     let mut pose = pose;
     let mut used = 0;
-    let mut current = cost(dm, pts, &pose, max_dist).0;
+    let (mut current, mut ne) = cost_and_normal_equations(dm, pts, &pose, max_dist);
     for _ in 0..iters {
-        let ne = normal_equations(dm, pts, &pose, max_dist);
         let (mut h, g) = (ne.h, ne.g);
         used = ne.n;
         if used < 3 {
@@ -229,10 +227,11 @@ pub fn refine(
                 pose.y - scale * step[1],
                 pose.theta - scale * step[2],
             );
-            let next = cost(dm, pts, &cand, max_dist).0;
+            let (next, next_ne) = cost_and_normal_equations(dm, pts, &cand, max_dist);
             if next < current {
                 pose = cand;
                 current = next;
+                ne = next_ne;
                 moved = true;
                 break;
             }
