@@ -61,6 +61,32 @@ impl<'a> DistMap<'a> {
         dist_cells(self.data.get(i).copied().unwrap_or(255))
     }
 
+    /// The distances (cells) at `(x0, y0)`, `(x0 + 1, y0)`, `(x0, y0 + 1)`
+    /// and `(x0 + 1, y0 + 1)`: read directly when all four lie inside the
+    /// grid (almost always), else cell by cell ([`DistMap::at`]).
+    #[inline]
+    fn corners(&self, x0: i64, y0: i64) -> [f32; 4] {
+        let (w, h) = (self.width as i64, self.height as i64);
+        if x0 >= 0 && y0 >= 0 && x0 + 1 < w && y0 + 1 < h {
+            let i = y0 as usize * self.width as usize + x0 as usize;
+            let j = i + self.width as usize;
+            if let (Some(a), Some(b)) = (self.data.get(i..i + 2), self.data.get(j..j + 2)) {
+                return [
+                    dist_cells(a[0]),
+                    dist_cells(a[1]),
+                    dist_cells(b[0]),
+                    dist_cells(b[1]),
+                ];
+            }
+        }
+        [
+            self.at(x0, y0),
+            self.at(x0 + 1, y0),
+            self.at(x0, y0 + 1),
+            self.at(x0 + 1, y0 + 1),
+        ]
+    }
+
     /// Distance (m) to the nearest surface at map point `p` and its gradient
     /// (dimensionless), by bilinear interpolation between cell centres.
     pub fn sample(&self, p: [f32; 2]) -> Option<(f32, [f32; 2])> {
@@ -76,10 +102,7 @@ impl<'a> DistMap<'a> {
         }
         let (x0, y0) = (floor_i64(u), floor_i64(v));
         let (fx, fy) = (u - x0 as f32, v - y0 as f32);
-        let d00 = self.at(x0, y0);
-        let d10 = self.at(x0 + 1, y0);
-        let d01 = self.at(x0, y0 + 1);
-        let d11 = self.at(x0 + 1, y0 + 1);
+        let [d00, d10, d01, d11] = self.corners(x0, y0);
         let unit = self.frame.resolution;
         let d = (d00 * (1.0 - fx) * (1.0 - fy)
             + d10 * fx * (1.0 - fy)

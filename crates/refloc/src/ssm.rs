@@ -255,7 +255,10 @@ pub fn match_scans(
     'outer: for a in 0..nl {
         let (qxa, qya, rxa, rya) = (qx[a], qy[a], rx[a], ry[a]);
         let lo = a + 1;
-        let ends = qx[lo..].iter().zip(&qy[lo..]).zip(rx[lo..].iter().zip(&ry[lo..]));
+        let ends = qx[lo..]
+            .iter()
+            .zip(&qy[lo..])
+            .zip(rx[lo..].iter().zip(&ry[lo..]));
         for (m, ((&x, &y), (&u, &v))) in reject[lo..].iter_mut().zip(ends) {
             let (dqx, dqy, drx, dry) = (x - qxa, y - qya, u - rxa, v - rya);
             let (lq2, lr2) = (dqx * dqx + dqy * dqy, drx * drx + dry * dry);
@@ -263,15 +266,9 @@ pub fn match_scans(
             *m = (diff * diff >= k2 * (lq2 + lr2)) as u8;
         }
         for (b, _) in reject.iter().enumerate().skip(lo).filter(|(_, &m)| m == 0) {
-            let Some((drho, dth2)) = pair_deformation(
-                q_pts,
-                q_tan,
-                r_pts,
-                r_tan,
-                work.tent[a],
-                work.tent[b],
-                dev,
-            ) else {
+            let Some((drho, dth2)) =
+                pair_deformation(q_pts, q_tan, r_pts, r_tan, work.tent[a], work.tent[b], dev)
+            else {
                 continue;
             };
             let g = affinity(&params.ssm.w, drho, dth2);
