@@ -117,7 +117,9 @@ class MapSet:
     """Localizes scans against several databases (floors, buildings) and says
     which map each scan is on, by the rule of `mapc localize A.refdb B.refdb
     ... SCANS`: the accepted answer with the highest confidence (the earlier
-    map on a tie), or no map. Each database has its own scratch memory."""
+    map on a tie) if it stays likely with the other maps' answers weighed
+    against it (its probability among the maps reaches its map's threshold),
+    or no map. Each database has its own scratch memory."""
     def __init__(self, dbs: Sequence[RefDb], max_beams: int = 2048) -> None: ...
     @property
     def dbs(self) -> list[RefDb]: ...

@@ -225,7 +225,8 @@ impl Localizer {
 /// Localizes scans against several databases (floors, buildings) and says
 /// which map each scan is on, by the rule of `mapc localize A.refdb B.refdb
 /// ... SCANS` (`refloc::select::which_map`): the accepted answer with the
-/// highest confidence, the earlier map on a tie, or no map. Each database
+/// highest confidence, the earlier map on a tie, if its probability among
+/// the maps still reaches its map's threshold; or no map. Each database
 /// has its own scratch memory, sized for scans of up to `max_beams` beams.
 #[pyclass(module = "refloc")]
 struct MapSet {
@@ -286,9 +287,11 @@ impl MapSet {
                 })
                 .collect()
         });
-        let map_index = refloc::select::which_map(answers.iter().map(|a| {
-            a.as_ref()
-                .map_or((false, 0.0), |l| (l.accepted, l.confidence))
+        let map_index = refloc::select::which_map(answers.iter().zip(dbs.iter()).map(|(a, db)| {
+            let threshold = db.decision().unwrap_or(refloc::Decision::DEFAULT).threshold;
+            a.as_ref().map_or((false, 0.0, threshold), |l| {
+                (l.accepted, l.confidence, threshold)
+            })
         }));
         let mut maps = Vec::with_capacity(answers.len());
         let mut reasons = Vec::with_capacity(answers.len());

@@ -215,18 +215,29 @@ def test_which_map_picks_the_map_the_scan_was_made_on(db_path, other_dbs, tmp_pa
             x, y = src.site_position(k)
             ranges, amin, inc = src.simulate_scan(x + 0.1, y - 0.1, 0.3 + k, beams=360)
             scans.append((ranges, amin, inc, want, (x + 0.1, y - 0.1)))
+    answers = []
     for ranges, amin, inc, want, (x, y) in scans:
         r = maps.localize(ranges, amin, inc)
-        assert r.map_index == want and r.accepted, (r, [m and m.confidence for m in r.maps])
+        confs = [m and m.confidence for m in r.maps]
         assert len(r.maps) == len(r.reasons) == 3
-        assert r.localization.pose == r.maps[want].pose
+        # Never a wrong map. No map when another one explains the scan about
+        # as well (the demo map and the synthetic office are both offices:
+        # a scan of one can fit the other at 0.999 too, a toss).
+        assert r.map_index in (want, None), (r, confs)
+        answers.append(r.map_index)
+        if r.map_index is None:
+            others = [c for k, c in enumerate(confs) if k != want and c is not None]
+            assert max(others) > 0.9, (r, confs)
+            continue
+        assert r.accepted and r.localization.pose == r.maps[want].pose
         if want == 1:
             # (Not on the synthetic office: a corridor there lets one of
             # these scans slide 1.8 m along it, accepted.)
             assert math.hypot(r.localization.x - x, r.localization.y - y) < 0.3
+    assert sum(a is not None for a in answers) >= 2, answers
     # The one-call form gives the same answer.
     ranges, amin, inc, want, _ = scans[0]
-    assert refloc.localize_maps(dbs, ranges, amin, inc).map_index == want
+    assert refloc.localize_maps(dbs, ranges, amin, inc).map_index == answers[0]
     # The CLI's several-map answer on the same scans: the same map each time.
     jl = tmp_path / "scans.jsonl"
     jl.write_text("".join(json.dumps({
@@ -236,7 +247,7 @@ def test_which_map_picks_the_map_the_scan_was_made_on(db_path, other_dbs, tmp_pa
     p = subprocess.run([MAPC, "localize", *map(str, other_dbs[:1] + [db_path] + other_dbs[1:]), str(jl)],
                        check=True, capture_output=True, text=True)
     cli = [json.loads(l)["map_index"] for l in p.stdout.splitlines()]
-    assert cli == [w for *_, w, _ in scans]
+    assert cli == answers
     # A scan no map can localize: no map, a reason for each.
     r = maps.localize(np.full(360, np.inf, dtype=np.float32), 0.0, 2 * math.pi / 360)
     assert r.map_index is None and not r.accepted and r.localization is None

@@ -339,7 +339,8 @@ fn grow_scratch(scratch: &mut Vec<u8>, params: &refloc::Params, beams: usize) {
 
 /// `mapc localize A.refdb B.refdb ... SCANS`: each scan against every
 /// database; the answer is the accepted localization with the highest
-/// confidence (its map, pose and confidence), or no map when none accepts
+/// confidence (its map, pose and confidence) if its probability among the
+/// maps still reaches its map's threshold, or no map
 /// (`refloc::select::which_map`, the rule the Python package uses too).
 fn run_maps(a: &Args, ui: &Ui) -> CliResult {
     if a.truth.is_some()
@@ -398,8 +399,14 @@ fn run_maps(a: &Args, ui: &Ui) -> CliResult {
             }
         }
         let time_us = t0.elapsed().as_micros() as u64;
-        let best =
-            refloc::select::which_map(per_map.iter().map(|m| (m.1, m.2))).map(|i| &per_map[i]);
+        let best = refloc::select::which_map(per_map.iter().map(|m| {
+            let threshold = dbs[m.0]
+                .decision()
+                .unwrap_or(refloc::Decision::DEFAULT)
+                .threshold;
+            (m.1, m.2, threshold)
+        }))
+        .map(|i| &per_map[i]);
         match best {
             Some(b) => chosen[b.0] += 1,
             None => none += 1,
