@@ -155,7 +155,7 @@ fn normal_equations(
     pose: &Pose2,
     max_dist: f32,
 ) -> NormalEquations {
-    cost_and_normal_equations(dm, pts, pose, max_dist).1
+    points_pass::<false>(dm, pts, pose, max_dist).1
 }
 
 /// The robust cost of `pose`, the sum over points of `c^2/2 * ln(1 +
@@ -163,6 +163,18 @@ fn normal_equations(
 /// `max_dist`), and the normal equations there, in one pass over the
 /// points: the refinement needs both at every pose its line search accepts.
 fn cost_and_normal_equations(
+    dm: &DistMap<'_>,
+    pts: &[[f32; 2]],
+    pose: &Pose2,
+    max_dist: f32,
+) -> (f32, NormalEquations) {
+    points_pass::<true>(dm, pts, pose, max_dist)
+}
+
+/// The one pass over the points behind [`normal_equations`] and
+/// [`cost_and_normal_equations`]; the robust cost (a logarithm per point)
+/// only when `COST`, else 0.
+fn points_pass<const COST: bool>(
     dm: &DistMap<'_>,
     pts: &[[f32; 2]],
     pose: &Pose2,
@@ -184,11 +196,13 @@ fn cost_and_normal_equations(
         }
         let m = [pose.x + c * p[0] - s * p[1], pose.y + s * p[0] + c * p[1]];
         let sample = dm.sample(m);
-        let d = match sample {
-            Some((d, _)) if d < max_dist => d,
-            _ => max_dist,
-        };
-        total += 0.5 * c2 * libm::logf(1.0 + d * d / c2);
+        if COST {
+            let d = match sample {
+                Some((d, _)) if d < max_dist => d,
+                _ => max_dist,
+            };
+            total += 0.5 * c2 * libm::logf(1.0 + d * d / c2);
+        }
         let Some((d, grad)) = sample else {
             continue;
         };
