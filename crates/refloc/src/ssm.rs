@@ -85,8 +85,9 @@ pub struct SsmResult {
 
 /// One descriptor bin: the share of a point's neighbours that fall in it,
 /// in units of `1 / DESC_SCALE` (a descriptor's bins sum to about
-/// [`DESC_SCALE`]). Bytes make the L1 distance of [`tentative`] a sum of
-/// absolute byte differences, which vector units do 16 or more at a time.
+/// [`DESC_SCALE`]). Integers make the L1 distance of [`tentative`] a sum of
+/// absolute differences, which vector units do 8 or more at a time (bytes
+/// were tried and lost precision that mattered: docs/performance.md).
 pub type DescBin = u16;
 
 /// What a descriptor's bins sum to (to within rounding).
@@ -97,7 +98,7 @@ pub const DESC_SCALE: u32 = 65535;
 /// their edges lie at 22.5 degrees from an axis or a diagonal.
 const TAN_EIGHTH_PI: f32 = 0.414_213_57;
 
-// The comparisons of `desc_cell` are written for 8 theta bins.
+// The comparisons of `theta_octant` are written for 8 theta bins.
 const _: () = assert!(DESC_THETA == 8);
 
 /// The theta bin (0..8) of a direction at `(dot, cross)` from a point's
@@ -135,7 +136,7 @@ fn theta_octant(dot: f32, cross: f32) -> usize {
 /// point `i`, the (rho, theta) histogram of the points within `radius` (m)
 /// (`DESC_RHO` equal rho bins, `DESC_THETA` theta bins around `i`'s
 /// tangent, the binning of [`crate::pgr::cell`]), normalized to sum
-/// [`DESC_SCALE`] and rounded to bytes. A point with no neighbour has an
+/// [`DESC_SCALE`] and rounded to integers. A point with no neighbour has an
 /// all-zero descriptor.
 pub fn descriptors(pts: &[[f32; 2]], tan: &[[f32; 2]], radius: f32, out: &mut [DescBin]) {
     let n = pts.len().min(tan.len()).min(out.len() / DESC_LEN);
@@ -639,26 +640,14 @@ fn ransac(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::tests::fixture::Prng;
     use core::f32::consts::PI;
-
-    /// A small deterministic generator (SplitMix64) in [lo, hi).
-    struct Gen(u64);
-    impl Gen {
-        fn range(&mut self, lo: f32, hi: f32) -> f32 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^= z >> 31;
-            lo + (hi - lo) * ((z >> 40) as f32 / (1u64 << 24) as f32)
-        }
-    }
 
     #[test]
     fn octants_are_the_bins_of_pgr_cell() {
         // Directions away from the bin edges (22.5 + 45 k degrees) land in
         // the bin the arctangent-based binning gives.
-        let mut g = Gen(7);
+        let mut g = Prng::new(7);
         for _ in 0..5000 {
             let t = g.range(-PI, PI);
             let to_edge = libm::fabsf(libm::remainderf(t - PI / 8.0, PI / 4.0));
@@ -734,7 +723,7 @@ mod tests {
     fn pair_deformation_rejects_exactly_the_pairs_whose_lengths_differ() {
         // The test without square roots must keep every pair the plain
         // |lq - lr| < dev test keeps, and give the plain formula's values.
-        let mut g = Gen(11);
+        let mut g = Prng::new(11);
         let dev = 0.3;
         let (mut kept, mut rejected) = (0, 0);
         for _ in 0..20000 {
