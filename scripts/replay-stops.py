@@ -22,26 +22,23 @@ refloc::select; the confirmation's skip of sites within 2 m of the best
 pose is not replayed (site positions are not in the records), so the
 runtime examines slightly fewer candidates. Pure Python.
 """
+import importlib.util
 import json
 import math
+import os
 import sys
 
-HIT = 4.5
-DIST, DHEAD = 1.0, math.radians(20.0)
+# The labelling and the model's pieces are those of fit-confidence.py.
+_spec = importlib.util.spec_from_file_location(
+    "fit_confidence", os.path.join(os.path.dirname(os.path.abspath(__file__)), "fit-confidence.py"))
+fc = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(fc)
+
 # refloc::Decision::DEFAULT: bias, then the weights of the evidence ratio,
 # the margin, ln support, the through share and the spread; the threshold.
-BIAS, WEIGHTS, THRESHOLD = -0.129, [0.039, 3.514, 1.496, -22.390, -4.782], 0.8
-AMBIGUITY_RATIO, AMBIGUOUS_CAP = 0.97, 0.5
+MODEL, THRESHOLD = [-0.129, 0.039, 3.514, 1.496, -22.390, -4.782], 0.8
+AMBIGUITY_RATIO = 0.97
 CONFIRM_GAMMA, CONFIRM_MAX, MIN_CANDIDATES = 0.05, 6, 6
-POS, TH = 0.3, math.radians(5.0)
-
-
-def wrap(a):
-    return (a + math.pi) % (2 * math.pi) - math.pi
-
-
-def distinct(a, b):
-    return (a["x"] - b["x"]) ** 2 + (a["y"] - b["y"]) ** 2 > DIST * DIST or abs(wrap(a["theta"] - b["theta"])) > DHEAD
 
 
 def better(a, b):
@@ -51,12 +48,12 @@ def better(a, b):
 
 
 def confidence(examined, c):
-    per = 1.0 / (HIT * c["pairs"]) if c["pairs"] else 0.0
+    per = 1.0 / (fc.HIT * c["pairs"]) if c["pairs"] else 0.0
     alt, support, ambiguous = 0.0, 0, False
     for o in examined:
         if not o["has_pose"]:
             continue
-        if distinct(o, c):
+        if fc.distinct(o, c):
             if o["free_space_ok"]:
                 alt = max(alt, o["evidence"])
                 ambiguous |= o["evidence"] >= AMBIGUITY_RATIO * c["evidence"]
@@ -64,9 +61,7 @@ def confidence(examined, c):
             support += 1
     x = [c["evidence"] * per, (c["evidence"] - alt) * per, math.log(max(support, 1)),
          c["through_beams"] / c["pairs"] if c["pairs"] else 0.0, c["spread"]]
-    z = BIAS + sum(w * v for w, v in zip(WEIGHTS, x))
-    p = 1.0 / (1.0 + math.exp(-max(-40.0, min(40.0, z))))
-    return min(p, AMBIGUOUS_CAP) if ambiguous else p
+    return fc.confidence(MODEL, x, ambiguous)
 
 
 def replay(cands, rule):
@@ -112,8 +107,7 @@ def main():
                 counts.append(k)
                 if best is not None and p >= THRESHOLD:
                     t = r.get("truth_refined")
-                    right = t is not None and math.hypot(best["x"] - t[0], best["y"] - t[1]) < POS \
-                        and abs(wrap(best["theta"] - t[2])) < TH
+                    right = t is not None and fc.near(best, t)
                     good += right
                     bad += not right
             n = len(rows)
