@@ -19,7 +19,7 @@ use crate::prior::Prior;
 use crate::raycast::BitGrid;
 use crate::refine::{self, DistMap};
 use crate::select::{self, Next, Search};
-use crate::ssm::{self, SsmWork, DESC_LEN};
+use crate::ssm::{self, DescBin, SsmWork, DESC_LEN};
 use crate::verify;
 use crate::Pose2;
 
@@ -385,11 +385,13 @@ struct Bufs<'a> {
     /// The prepared query: resampled points and tangents.
     q_pts: &'a mut [[f32; 2]],
     q_tan: &'a mut [[f32; 2]],
-    /// A candidate's reference scan: dense points, then prepared points and
-    /// tangents (the last two also serve the query histogram).
+    /// A candidate's reference scan: dense points, then prepared points,
+    /// tangents (these two also serve the query histogram) and descriptors
+    /// (unused when the database stores them: [`RefDb::features`]).
     r_dense: &'a mut [[f32; 2]],
     r_pts: &'a mut [[f32; 2]],
     r_tan: &'a mut [[f32; 2]],
+    r_desc: &'a mut [DescBin],
     hist: &'a mut [f32],
     top: &'a mut [Ranked],
     cands: &'a mut [Candidate],
@@ -408,12 +410,12 @@ fn carve<'a>(d: &Dims, ar: &mut Arena<'a>) -> Option<Bufs<'a>> {
         r_dense: ar.take(d.ref_beams)?,
         r_pts: ar.take(d.points)?,
         r_tan: ar.take(d.points)?,
+        r_desc: ar.take(d.points * DESC_LEN)?,
         hist: ar.take(d.hist)?,
         top: ar.take(d.cands)?,
         cands: ar.take(d.cands)?,
         work: SsmWork {
             qdesc: ar.take(d.points * DESC_LEN)?,
-            rdesc: ar.take(d.points * DESC_LEN)?,
             tent: ar.take(d.tent)?,
             ends: ar.take(4 * d.tent)?,
             aff: ar.take(d.aff)?,
@@ -627,34 +629,35 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         &self.b.cands[..n.min(self.nc)]
     }
 
-    /// SSM of the prepared scan against `site`'s reference scan: the site's
-    /// ranges to points, their preparation and descriptors, the match.
+    /// SSM of the prepared scan against `site`'s reference scan: the
+    /// site's prepared points, tangents and descriptors (stored in the
+    /// database, [`RefDb::features`], or else computed here by
+    /// [`reference_features`]: the same values either way), then the match.
     pub fn match_site(&mut self, site: usize) -> Option<ssm::SsmResult> {
         let p = self.params;
-        let s = &p.sensor;
         let b = &mut self.b;
-        let n = prep::ranges_to_points(
-            self.db.scan(site),
-            s.angle_min,
-            s.angle_increment,
-            s.range_min,
-            s.range_max,
-            b.r_dense,
-        );
-        let ref_wrap = prep::covers_full_turn(s.angle_increment, s.beams as usize);
-        let nr = prep::prepare(&b.r_dense[..n], ref_wrap, p, b.r_pts, b.r_tan);
-        ssm::descriptors(
-            &b.r_pts[..nr],
-            &b.r_tan[..nr],
-            p.ssm.desc_radius,
-            b.work.rdesc,
-        );
+        let (r_pts, r_tan, r_desc): (&[[f32; 2]], &[[f32; 2]], &[DescBin]) =
+            match self.db.features(site) {
+                Some(f) => (f.points, f.tangents, f.desc),
+                None => {
+                    let nr = reference_features(
+                        self.db.scan(site),
+                        p,
+                        b.r_dense,
+                        b.r_pts,
+                        b.r_tan,
+                        b.r_desc,
+                    );
+                    (&b.r_pts[..nr], &b.r_tan[..nr], &b.r_desc[..nr * DESC_LEN])
+                }
+            };
         let nq = self.scan.points;
         ssm::match_scans(
             &b.q_pts[..nq],
             &b.q_tan[..nq],
-            &b.r_pts[..nr],
-            &b.r_tan[..nr],
+            r_pts,
+            r_tan,
+            r_desc,
             p,
             &mut b.work,
         )
@@ -892,6 +895,40 @@ fn unexamined(c: usize, r: &Ranked) -> Candidate {
         spread: confidence::SPREAD_MAX,
         ..Candidate::default()
     }
+}
+
+/// The reference side of SSM for a site whose reference scan has `ranges`
+/// (m, one per reference beam, `INFINITY` for no return): the ranges as
+/// sensor-frame points (into `dense`, one per beam), the prepared points
+/// and unit tangents ([`prep::prepare`], into `pts` and `tan`) and their
+/// descriptors ([`ssm::descriptors`], [`DESC_LEN`] bins per point into
+/// `desc`). Returns the number of prepared points, at most
+/// `params.prep.max_points` and the room in `pts`, `tan` and `desc`.
+///
+/// The one computation of these: the localizer runs it per candidate when
+/// the database does not store them, and `mapc build` runs it per site to
+/// store them in the features section ([`RefDb::features`]).
+pub fn reference_features(
+    ranges: &[f32],
+    params: &Params,
+    dense: &mut [[f32; 2]],
+    pts: &mut [[f32; 2]],
+    tan: &mut [[f32; 2]],
+    desc: &mut [DescBin],
+) -> usize {
+    let s = &params.sensor;
+    let n = prep::reference_points(ranges, params, dense);
+    let wrap = prep::covers_full_turn(s.angle_increment, s.beams as usize);
+    let room = pts.len().min(tan.len()).min(desc.len() / DESC_LEN);
+    let nr = prep::prepare(
+        &dense[..n],
+        wrap,
+        params,
+        &mut pts[..room],
+        &mut tan[..room],
+    );
+    ssm::descriptors(&pts[..nr], &tan[..nr], params.ssm.desc_radius, desc);
+    nr
 }
 
 /// Localizes `scan` against `db` with no initial pose, using only `scratch`

@@ -213,3 +213,19 @@ pub fn ranges_to_points(
     }
     n
 }
+
+/// Sensor-frame points (m) of a reference scan: `ranges` (m, one per beam
+/// of the database's reference sensor `params.sensor`) through
+/// [`ranges_to_points`] with that sensor's beam angles and range limits.
+/// Writes `min(ranges.len(), out.len())` points.
+pub fn reference_points(ranges: &[f32], params: &Params, out: &mut [[f32; 2]]) -> usize {
+    let s = &params.sensor;
+    ranges_to_points(
+        ranges,
+        s.angle_min,
+        s.angle_increment,
+        s.range_min,
+        s.range_max,
+        out,
+    )
+}

@@ -45,8 +45,6 @@ pub struct Affinity {
 pub struct SsmWork<'a> {
     /// Input descriptors, `max_points * DESC_LEN`.
     pub qdesc: &'a mut [DescBin],
-    /// Reference descriptors, `max_points * DESC_LEN`.
-    pub rdesc: &'a mut [DescBin],
     /// Tentative correspondences (input index, reference index).
     pub tent: &'a mut [[u16; 2]],
     /// Their end points as four arrays of `tent.len()` each: input x, input
@@ -206,14 +204,17 @@ pub fn desc_distance(a: &[DescBin; DESC_LEN], b: &[DescBin; DESC_LEN]) -> u32 {
     d
 }
 
-/// Runs SSM between input (`q_*`) and reference (`r_*`) prepared scans whose
-/// descriptors are already in `work.qdesc` / `work.rdesc`. `None` when no pose
-/// with at least `min_inliers` inliers was found.
+/// Runs SSM between input (`q_*`) and reference (`r_*`) prepared scans; the
+/// input's descriptors are already in `work.qdesc`, the reference's are
+/// `rdesc` ([`DESC_LEN`] bins per reference point: computed per candidate,
+/// or stored in the database). `None` when no pose with at least
+/// `min_inliers` inliers was found.
 pub fn match_scans(
     q_pts: &[[f32; 2]],
     q_tan: &[[f32; 2]],
     r_pts: &[[f32; 2]],
     r_tan: &[[f32; 2]],
+    rdesc: &[DescBin],
     params: &Params,
     work: &mut SsmWork<'_>,
 ) -> Option<SsmResult> {
@@ -227,7 +228,7 @@ pub fn match_scans(
         nr,
         params.ssm.tentative_k as usize,
         work.qdesc,
-        work.rdesc,
+        rdesc,
         work.tent,
     );
     let nl = nl

@@ -169,16 +169,8 @@ pub(crate) mod fixture {
 
     /// Normalized PGR histogram of a reference scan, as the compiler makes it.
     pub(crate) fn histogram(ranges: &[f32], p: &Params) -> Vec<f32> {
-        let s = &p.sensor;
         let mut dense = vec![[0f32; 2]; ranges.len()];
-        let n = prep::ranges_to_points(
-            ranges,
-            s.angle_min,
-            s.angle_increment,
-            s.range_min,
-            s.range_max,
-            &mut dense,
-        );
+        let n = prep::reference_points(ranges, p, &mut dense);
         let m = p.prep.max_points as usize;
         let (mut pts, mut tan) = (vec![[0f32; 2]; m], vec![[0f32; 2]; m]);
         let k = prep::prepare(&dense[..n], true, p, &mut pts, &mut tan);
@@ -267,6 +259,7 @@ pub(crate) mod fixture {
             windows.extend(window_histograms(&r, &p));
             scans.extend(r);
         }
+        let features = features_section(&scans, &p);
         // Every kind the format knows, in its order: a new kind fails to
         // compile here until the fixture makes it.
         SectionKind::ALL
@@ -287,10 +280,40 @@ pub(crate) mod fixture {
                     SectionKind::Decision => format::DecisionRecord::of(&crate::Decision::DEFAULT)
                         .as_bytes()
                         .to_vec(),
+                    SectionKind::Features => features.clone(),
                 };
                 (k, bytes)
             })
             .collect()
+    }
+
+    /// The features section of reference scans `scans` (`BEAMS` ranges per
+    /// site, concatenated), computed by the runtime's own
+    /// [`crate::localize::reference_features`] and laid out by
+    /// [`format::FeaturesLayout`].
+    pub(crate) fn features_section(scans: &[f32], p: &Params) -> Vec<u8> {
+        let m = p.prep.max_points as usize;
+        let (mut offsets, mut pts, mut tans, mut descs) = (vec![0u32], vec![], vec![], vec![]);
+        for r in scans.chunks(p.sensor.beams as usize) {
+            let mut dense = vec![[0f32; 2]; r.len()];
+            let (mut rp, mut rt) = (vec![[0f32; 2]; m], vec![[0f32; 2]; m]);
+            let mut rd = vec![0 as crate::ssm::DescBin; m * crate::ssm::DESC_LEN];
+            let n =
+                crate::localize::reference_features(r, p, &mut dense, &mut rp, &mut rt, &mut rd);
+            offsets.push(offsets[offsets.len() - 1] + n as u32);
+            pts.extend_from_slice(&rp[..n]);
+            tans.extend_from_slice(&rt[..n]);
+            descs.extend_from_slice(&rd[..n * crate::ssm::DESC_LEN]);
+        }
+        let sites = offsets.len() as u64 - 1;
+        let layout = format::FeaturesLayout::new(sites, pts.len() as u64).expect("small");
+        let mut out = offsets.as_bytes().to_vec();
+        out.resize(layout.points_at, 0);
+        out.extend_from_slice(pts.as_bytes());
+        out.extend_from_slice(tans.as_bytes());
+        out.extend_from_slice(descs.as_bytes());
+        assert_eq!(out.len(), layout.len);
+        out
     }
 
     /// A coarse-search index for the fixture: per view (full, then each
@@ -373,14 +396,7 @@ pub(crate) mod fixture {
         let s = &p.sensor;
         let n = ranges.len();
         let mut dense = vec![[0f32; 2]; n];
-        prep::ranges_to_points(
-            ranges,
-            s.angle_min,
-            s.angle_increment,
-            s.range_min,
-            s.range_max,
-            &mut dense,
-        );
+        prep::reference_points(ranges, p, &mut dense);
         let mut wp = *p;
         wp.coarse.hist_rho_bins = p.coarse.win_rho_bins;
         wp.coarse.hist_theta_bins = p.coarse.win_theta_bins;
@@ -633,7 +649,6 @@ fn ransac_match_recovers_a_rigid_transform_from_exact_correspondences() {
         ssm::descriptors(&r_pts, &r_tan, p.ssm.desc_radius, &mut rdesc);
         let mut work = SsmWork {
             qdesc: &mut qdesc,
-            rdesc: &mut rdesc,
             tent: &mut tbuf,
             ends: &mut ends,
             aff: &mut aff,
@@ -643,7 +658,7 @@ fn ransac_match_recovers_a_rigid_transform_from_exact_correspondences() {
             acc: &mut acc,
             flags: &mut flags,
         };
-        let m = ssm::match_scans(&q_pts, &q_tan, &r_pts, &r_tan, &p, &mut work)
+        let m = ssm::match_scans(&q_pts, &q_tan, &r_pts, &r_tan, &rdesc, &p, &mut work)
             .expect("SSM finds the transform");
         assert!(m.inliers >= p.ssm.min_inliers);
         assert!(

@@ -1,10 +1,14 @@
 //! Assembling a `.refdb` from a placed map: reference scans (ray cast with
 //! `refloc::raycast`), PGR histograms (`refloc::pgr`, the runtime's own
 //! function), the beam grid, the distance map, the logistic weights fitted
-//! on the map's own simulated scans, and the build manifest.
+//! on the map's own simulated scans, the stored reference side of SSM
+//! (`refloc::localize::reference_features`, the runtime's own function),
+//! and the build manifest.
 
 use rayon::prelude::*;
-use refloc::format::{dist_encode, MetaRecord, SectionKind, SiteRecord};
+use refloc::format::{
+    dist_encode, FeaturesLayout, MetaRecord, SectionKind, SiteRecord, FEATURE_POINT_BYTES,
+};
 use refloc::params::Params;
 use refloc::raycast::BitGrid;
 use refloc::{pgr, prep, MapFrame, Pose2};
@@ -81,11 +85,13 @@ pub fn ref_lidar(params: &Params) -> Lidar {
 
 /// Default largest database a build may write, in bytes (`mapc build
 /// --max-db-bytes`, [`crate::compiler::pipeline::BuildConfig::max_db_bytes`]): 1 GiB,
-/// over 100 times the largest shared map's (willow-2010: 536 sites, 9 MB),
-/// and the size of the 8000 x 8000 synthetic office of `docs/scaling.md`
-/// (34,609 sites, 648 MiB) with room to spare; its 16000 x 16000 office
-/// (140,415 sites, 2.6 GiB) needs a higher limit. A build's peak memory is
-/// a little above its database's size.
+/// over 60 times the largest shared map's (willow-2010: 536 sites, 9 MB
+/// without the stored SSM features, about 16 MB with them), and the size
+/// of the 8000 x 8000 synthetic office of `docs/scaling.md` without the
+/// stored features (34,609 sites, 648 MiB); with them (up to 12.8 KB more
+/// per site) it and the 16000 x 16000 office (140,415 sites, 2.6 GiB
+/// without) need a higher limit. A build's peak memory is a little above
+/// its database's size.
 pub const DEFAULT_MAX_DB_BYTES: u64 = 1 << 30;
 
 /// The size of the database sections that grow with the map and its sites,
@@ -95,44 +101,132 @@ pub const DEFAULT_MAX_DB_BYTES: u64 = 1 << 30;
 pub struct DbSize {
     /// Reference sites.
     pub sites: u64,
-    /// Bytes each site adds: its reference scan, PGR histogram, window
-    /// histograms and site record.
+    /// Bytes each site adds at most: its reference scan, PGR histogram,
+    /// window histograms and site record, and with the stored SSM features
+    /// its offset and [`FEATURE_POINT_BYTES`] per prepared point, counted
+    /// at `max_points` points.
     pub per_site: u64,
+    /// The features section at its largest (every site with `max_points`
+    /// prepared points; bytes, 0 without it): the only part of `total`
+    /// that is a bound rather than the exact size.
+    pub features: u64,
     /// All of it: the sites' bytes and their neighbour lists, the grid,
-    /// the distance map and the fixed records (meta, params, decision)
-    /// (bytes; saturating). The coarse-search index, the manifest and the
-    /// container's header and padding come on top.
+    /// the distance map, the fixed records (meta, params, decision) and
+    /// the features section at its largest (bytes; saturating). The
+    /// coarse-search index, the manifest and the container's header and
+    /// padding come on top.
     pub total: u64,
 }
 
 /// The size of a database of `sites` sites with `neighbours` neighbour
 /// links in all (the sum of their lists' lengths) on a `width` x `height`
-/// grid, compiled with `params`: the bytes of every section of a
-/// [`crate::compiler::pipeline::build`] but the index and the manifest.
-pub fn db_size(params: &Params, width: u32, height: u32, sites: usize, neighbours: u64) -> DbSize {
+/// grid, compiled with `params`, with the stored SSM features or without
+/// (`features`): the bytes of every section of a
+/// [`crate::compiler::pipeline::build`] but the index and the manifest,
+/// the features section counted at its largest ([`DbSize::features`]).
+pub fn db_size(
+    params: &Params,
+    width: u32,
+    height: u32,
+    sites: usize,
+    neighbours: u64,
+    features: bool,
+) -> DbSize {
     let floats = params.sensor.beams as u64
         + params.coarse.hist_cells() as u64
         + (params.coarse.win_count() as u64)
             .saturating_mul(params.coarse.win_headings as u64)
             .saturating_mul(params.coarse.win_cells() as u64);
-    let per_site = floats
+    let max_points = params.prep.max_points as u64;
+    let features_max = if features {
+        FeaturesLayout::new(sites as u64, max_points.saturating_mul(sites as u64))
+            .map_or(u64::MAX, |l| l.len as u64)
+    } else {
+        0
+    };
+    let per_site_features = if features {
+        4 + max_points * FEATURE_POINT_BYTES as u64
+    } else {
+        0
+    };
+    let base = floats
         .saturating_mul(4)
         .saturating_add(std::mem::size_of::<SiteRecord>() as u64);
     let cells = width as u64 * height as u64;
     let fixed = (std::mem::size_of::<MetaRecord>()
         + std::mem::size_of::<refloc::format::ParamsRecord>()
         + std::mem::size_of::<refloc::format::DecisionRecord>()) as u64;
-    let total = per_site
+    let total = base
         .saturating_mul(sites as u64)
+        .saturating_add(features_max)
         .saturating_add(neighbours.saturating_mul(4))
         .saturating_add(BitGrid::words_for(width, height) as u64 * 4)
         .saturating_add(cells)
         .saturating_add(fixed);
     DbSize {
         sites: sites as u64,
-        per_site,
+        per_site: base.saturating_add(per_site_features),
+        features: features_max,
         total,
     }
+}
+
+/// Sites whose features are computed at once (in parallel) before their
+/// bytes join the section: bounds the memory held twice.
+const FEATURE_BATCH: usize = 256;
+
+/// The features section ([`SectionKind::Features`], laid out by
+/// [`FeaturesLayout`]): for every site, in site order, the reference side
+/// of SSM that the runtime would otherwise compute per candidate, by the
+/// runtime's own [`refloc::localize::reference_features`] with the stored
+/// `params`. Deterministic whatever the thread count. The descriptors (80%
+/// of the bytes) are written straight into the section; the offsets,
+/// points and tangents are put in front of them at the end, in place.
+pub fn features_section(scans: &[Vec<f32>], params: &Params) -> Vec<u8> {
+    let m = params.prep.max_points as usize;
+    let bound =
+        FeaturesLayout::new(scans.len() as u64, (m * scans.len()) as u64).map_or(0, |l| l.len);
+    let mut out: Vec<u8> = Vec::with_capacity(bound);
+    let (mut offsets, mut pts, mut tans) = (vec![0u32], Vec::new(), Vec::new());
+    let le = |v: &[[f32; 2]], to: &mut Vec<u8>| {
+        to.extend(v.iter().flatten().flat_map(|x| x.to_le_bytes()));
+    };
+    for batch in scans.chunks(FEATURE_BATCH) {
+        let done: Vec<_> = batch
+            .par_iter()
+            .map(|ranges| {
+                let mut dense = vec![[0f32; 2]; ranges.len()];
+                let (mut p, mut t) = point_buffers(params);
+                let mut d = vec![0 as refloc::ssm::DescBin; m * refloc::ssm::DESC_LEN];
+                let n = refloc::localize::reference_features(
+                    ranges, params, &mut dense, &mut p, &mut t, &mut d,
+                );
+                p.truncate(n);
+                t.truncate(n);
+                d.truncate(n * refloc::ssm::DESC_LEN);
+                (p, t, d)
+            })
+            .collect();
+        for (p, t, d) in done {
+            let last = offsets[offsets.len() - 1];
+            offsets.push(last + p.len() as u32);
+            le(&p, &mut pts);
+            le(&t, &mut tans);
+            out.extend(d.iter().flat_map(|v| v.to_le_bytes()));
+        }
+    }
+    let total = offsets[offsets.len() - 1] as u64;
+    let layout = FeaturesLayout::new(scans.len() as u64, total)
+        .unwrap_or_else(|| unreachable!("{total} points of {} sites fit in memory", scans.len()));
+    let desc_len = out.len();
+    out.extend(offsets.iter().flat_map(|o| o.to_le_bytes()));
+    out.resize(desc_len + layout.points_at, 0);
+    out.extend_from_slice(&pts);
+    out.extend_from_slice(&tans);
+    let head = out.len() - desc_len;
+    out.rotate_right(head);
+    debug_assert_eq!(out.len(), layout.len);
+    out
 }
 
 /// Reference scan ranges of every site (m; `INFINITY` for no return). The
@@ -160,16 +254,8 @@ pub fn reference_scans(
 /// Sensor-frame points of a reference scan's ranges (one per beam; a beam
 /// with no return is a NaN point), as the runtime reads a range scan.
 fn reference_points(ranges: &[f32], params: &Params) -> Vec<[f32; 2]> {
-    let s = &params.sensor;
     let mut dense = vec![[0f32; 2]; ranges.len()];
-    let n = prep::ranges_to_points(
-        ranges,
-        s.angle_min,
-        s.angle_increment,
-        s.range_min,
-        s.range_max,
-        &mut dense,
-    );
+    let n = prep::reference_points(ranges, params, &mut dense);
     dense.truncate(n);
     dense
 }

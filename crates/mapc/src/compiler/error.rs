@@ -47,16 +47,19 @@ pub enum BuildError {
     },
     /// The database would exceed `--max-db-bytes`.
     #[error(
-        "the database would take at least {total} bytes: {sites} reference sites of {per_site} \
-         bytes each (for {free_cells} free cells at {resolution} m per cell) plus the grid and \
-         distance map; the limit is {limit} bytes (--max-db-bytes raises it)"
+        "the database would take about {total} bytes: {sites} reference sites of up to \
+         {per_site} bytes each (for {free_cells} free cells at {resolution} m per cell) plus the \
+         grid and distance map; the limit is {limit} bytes (--max-db-bytes raises it; \
+         --no-ssm-features leaves out the stored SSM features)"
     )]
     TooLarge {
-        /// Bytes of every section but the index and the manifest.
+        /// Bytes of every section but the index and the manifest, the
+        /// stored SSM features counted at their largest
+        /// ([`crate::compiler::compile::DbSize`]).
         total: u64,
         /// Reference sites placed.
         sites: u64,
-        /// Bytes per site.
+        /// Bytes per site (at most).
         per_site: u64,
         /// Free cells of the map.
         free_cells: usize,

@@ -80,6 +80,12 @@ pub struct BuildConfig {
     /// `refloc::confidence`) is at least this (0..=1); stored with the
     /// default model in the decision section.
     pub accept_confidence: f32,
+    /// Store the reference side of SSM (each site's prepared points,
+    /// tangents and descriptors: the features section, up to 12.8 KB per
+    /// site with 160 points) so that the runtime does not compute it per
+    /// candidate; off leaves the section out (smaller file, for
+    /// flash-constrained targets; the answers are the same).
+    pub ssm_features: bool,
     /// The coarse-search index (built for maps with at least
     /// `index.min_sites` sites; its seed is replaced by `seed`).
     pub index: crate::compiler::index::IndexOptions,
@@ -134,6 +140,7 @@ impl Default for BuildConfig {
             through_run: p.verify.through_run,
             occlusion_fit: p.verify.occlusion_fit,
             accept_confidence: refloc::Decision::DEFAULT.threshold,
+            ssm_features: true,
             index: crate::compiler::index::IndexOptions::default(),
             max_db_bytes: compile::DEFAULT_MAX_DB_BYTES,
         }
@@ -331,11 +338,19 @@ fn check_db_size(
     src: &MapSource,
     params: &Params,
     sites: &[sites::SitePlacement],
-    max_db_bytes: u64,
+    cfg: &BuildConfig,
 ) -> Result<(), BuildError> {
     let grid = &src.grid;
     let links = sites.iter().map(|s| s.neighbours.len() as u64).sum();
-    let size = compile::db_size(params, grid.width, grid.height, sites.len(), links);
+    let size = compile::db_size(
+        params,
+        grid.width,
+        grid.height,
+        sites.len(),
+        links,
+        cfg.ssm_features,
+    );
+    let max_db_bytes = cfg.max_db_bytes;
     if size.total <= max_db_bytes {
         return Ok(());
     }
@@ -386,7 +401,7 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, BuildErr
     )?;
     let placed = sites::place_sites(grid, &df, &graph, &sopts);
     laps.lap("sites.place");
-    check_db_size(src, &params, &placed, cfg.max_db_bytes)?;
+    check_db_size(src, &params, &placed, cfg)?;
     let coverage = sites::coverage(grid, &bitgrid, &df, &placed, 0.25, cfg.coverage_range);
     times.sites = t.elapsed().as_secs_f64();
     laps.lap("sites.coverage");
@@ -452,6 +467,13 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, BuildErr
         zerocopy::IntoBytes::as_bytes(&refloc::format::DecisionRecord::of(&decision)).to_vec(),
     ));
     laps.lap("index");
+    if cfg.ssm_features {
+        sections.push((
+            SectionKind::Features,
+            compile::features_section(&scans, &params),
+        ));
+        laps.lap("features");
+    }
     times.compile = t.elapsed().as_secs_f64();
     let manifest = serde_json::json!({
         "generator": "mapc",

@@ -726,7 +726,6 @@ pub fn ssm_match_pair<D: AsRef<[u8]>>(db: &RefDb<D>, pair: &E1Pair) -> E1Trial {
     let mut ends = vec![0f32; 4 * nl];
     let mut work = SsmWork {
         qdesc: &mut qd,
-        rdesc: &mut rd,
         tent: &mut tent,
         ends: &mut ends,
         aff: &mut aff,
@@ -741,6 +740,7 @@ pub fn ssm_match_pair<D: AsRef<[u8]>>(db: &RefDb<D>, pair: &E1Pair) -> E1Trial {
         &qt[..nq],
         &rp[..nr],
         &rt[..nr],
+        &rd,
         params,
         &mut work,
     );

@@ -12,12 +12,13 @@ use zerocopy::FromBytes;
 
 use crate::confidence::Decision;
 use crate::format::{
-    self, crc, DecisionRecord, Header, MetaRecord, ParamsRecord, SectionEntry, SectionKind,
-    SiteRecord, ENDIAN_CHECK, ENTRY_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, MAX_SECTIONS,
-    SECTION_ALIGN,
+    self, crc, DecisionRecord, FeaturesLayout, Header, MetaRecord, ParamsRecord, SectionEntry,
+    SectionKind, SiteRecord, ENDIAN_CHECK, ENTRY_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC,
+    MAX_SECTIONS, SECTION_ALIGN,
 };
 use crate::params::Params;
 use crate::raycast::BitGrid;
+use crate::ssm::{DescBin, DESC_LEN, DESC_SCALE};
 use crate::{MapFrame, Pose2};
 
 /// What is wrong with a database.
@@ -360,6 +361,83 @@ impl<D: AsRef<[u8]>> RefDb<D> {
     pub fn manifest(&self) -> &str {
         core::str::from_utf8(self.section(SectionKind::Manifest)).unwrap_or("")
     }
+
+    /// The stored reference side of SSM for site `i` (see
+    /// [`SiteFeatures`]); `None` when the database has no features section
+    /// (the runtime then computes them) or `i` is past the last site.
+    pub fn features(&self, i: usize) -> Option<SiteFeatures<'_>> {
+        if i >= self.site_count {
+            return None;
+        }
+        let f = FeatureArrays::of(self.section(SectionKind::Features), self.site_count).ok()?;
+        let (a, b) = (*f.offsets.get(i)? as usize, *f.offsets.get(i + 1)? as usize);
+        Some(SiteFeatures {
+            points: f.points.get(a..b)?,
+            tangents: f.tangents.get(a..b)?,
+            desc: f
+                .desc
+                .get(a.checked_mul(DESC_LEN)?..b.checked_mul(DESC_LEN)?)?,
+        })
+    }
+}
+
+/// The reference side of spectral scan matching for one site, as stored in
+/// the features section: what [`crate::localize::reference_features`]
+/// computes from the site's reference scan. All three have one entry (one
+/// row) per prepared point, at most `params.prep.max_points`.
+#[derive(Clone, Copy, Debug)]
+pub struct SiteFeatures<'a> {
+    /// Prepared points in the site's sensor frame (m; the reference sensor
+    /// sits on the site heading along the map's +x axis); all finite.
+    pub points: &'a [[f32; 2]],
+    /// Their unit tangents (dimensionless, along increasing beam index).
+    pub tangents: &'a [[f32; 2]],
+    /// Their descriptors, [`DESC_LEN`] bins per point in units of
+    /// `1 / DESC_SCALE` ([`crate::ssm::descriptors`]); each row sums to at
+    /// most `DESC_SCALE + DESC_LEN`.
+    pub desc: &'a [DescBin],
+}
+
+/// The arrays of a features section, split by its [`FeaturesLayout`]
+/// (sizes and memory alignment checked; values not).
+struct FeatureArrays<'a> {
+    offsets: &'a [u32],
+    points: &'a [[f32; 2]],
+    tangents: &'a [[f32; 2]],
+    desc: &'a [DescBin],
+}
+
+impl<'a> FeatureArrays<'a> {
+    /// Splits `bytes` (a features section of `sites` sites); `Size` when
+    /// it is shorter than its offsets or not as long as they say,
+    /// `Alignment` when it lies misaligned in memory.
+    fn of(bytes: &'a [u8], sites: usize) -> Result<FeatureArrays<'a>, DbError> {
+        const CTX: &str = "features";
+        let size = |want: u64| DbError::new(DbErrorKind::Size, CTX, want, bytes.len() as u64);
+        let misaligned = || DbError::misaligned_in_memory(CTX, 4, bytes);
+        let n_off = sites.saturating_add(1);
+        let head = (n_off as u64).saturating_mul(4);
+        if (bytes.len() as u64) < head {
+            return Err(size(head));
+        }
+        let (offsets, _) =
+            <[u32]>::ref_from_prefix_with_elems(bytes, n_off).map_err(|_| misaligned())?;
+        let total = offsets.last().copied().unwrap_or(0) as u64;
+        let layout = FeaturesLayout::new(sites as u64, total).ok_or(size(u64::MAX))?;
+        if bytes.len() != layout.len {
+            return Err(size(layout.len as u64));
+        }
+        let pairs = |r: Range<usize>| {
+            <[[f32; 2]]>::ref_from_bytes(bytes.get(r).unwrap_or(&[])).map_err(|_| misaligned())
+        };
+        Ok(FeatureArrays {
+            offsets,
+            points: pairs(layout.points_at..layout.tangents_at)?,
+            tangents: pairs(layout.tangents_at..layout.desc_at)?,
+            desc: <[DescBin]>::ref_from_bytes(bytes.get(layout.desc_at..).unwrap_or(&[]))
+                .map_err(|_| misaligned())?,
+        })
+    }
 }
 
 type Parsed = (
@@ -386,6 +464,7 @@ fn parse(bytes: &[u8]) -> Result<Parsed, DbError> {
     crate::index::validate(sec.get(SectionKind::Index), &params, n_sites as usize)
         .map_err(DbError::invalid)?;
     let decision = parse_decision(&sec)?;
+    check_features(&sec, &params, n_sites as usize)?;
     Ok((ranges, crcs, meta, params, decision))
 }
 
@@ -725,6 +804,65 @@ fn parse_decision(sec: &Sections<'_, '_>) -> Result<Option<Decision>, DbError> {
         return Err(DbError::invalid("decision model (a non-finite weight)"));
     }
     Ok(Some(m))
+}
+
+/// Step 9: the optional features section. Its length is what its offsets
+/// say ([`FeaturesLayout`]); the offsets start at 0 and no site has more
+/// than `max_points` points; every point and tangent is finite, every
+/// tangent a unit vector (to 1e-3), and every descriptor row sums to at
+/// most `DESC_SCALE + DESC_LEN` (the rounding of its bins). O(section).
+fn check_features(sec: &Sections<'_, '_>, params: &Params, n_sites: usize) -> Result<(), DbError> {
+    let bytes = sec.get(SectionKind::Features);
+    if bytes.is_empty() {
+        return Ok(());
+    }
+    // The offsets first: the layout (and so the size check) depends on the
+    // last one, but a decreasing or oversized count is the clearer error.
+    let head = n_sites.saturating_add(1).saturating_mul(4);
+    if let Some(Ok((offsets, _))) = bytes
+        .get(..head)
+        .map(|h| <[u32]>::ref_from_prefix_with_elems(h, n_sites + 1))
+    {
+        if offsets[0] != 0 {
+            return Err(DbError::value("features offsets[0]", offsets[0] as f64));
+        }
+        let max = params.prep.max_points;
+        for w in offsets.windows(2) {
+            let count = w[1].checked_sub(w[0]).ok_or(DbError::invalid(
+                "features offsets (decreasing: a negative point count)",
+            ))?;
+            if count > max {
+                return Err(DbError {
+                    expected: max as u64,
+                    ..DbError::value("features point count (over max_points)", count as f64)
+                });
+            }
+        }
+    }
+    let f = FeatureArrays::of(bytes, n_sites)?;
+    if let Some(v) = f.points.iter().flatten().find(|v| !v.is_finite()) {
+        return Err(DbError::value("features point", *v as f64));
+    }
+    for t in f.tangents {
+        let n2 = t[0] * t[0] + t[1] * t[1];
+        if !(libm::fabsf(n2 - 1.0) <= 2e-3) {
+            return Err(DbError::value(
+                "features tangent (not a unit vector)",
+                libm::sqrtf(n2) as f64,
+            ));
+        }
+    }
+    let bound = DESC_SCALE + DESC_LEN as u32;
+    for row in f.desc.chunks_exact(DESC_LEN) {
+        let sum: u32 = row.iter().map(|&v| v as u32).sum();
+        if sum > bound {
+            return Err(DbError {
+                expected: bound as u64,
+                ..DbError::value("features descriptor (bins sum over DESC_SCALE)", sum as f64)
+            });
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

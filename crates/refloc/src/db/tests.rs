@@ -17,6 +17,7 @@ use zerocopy::{FromBytes, IntoBytes};
 use super::*;
 use crate::format::{ParamsRecord, SiteRecord};
 use crate::raycast::Occupancy;
+use crate::ssm::DESC_LEN;
 use crate::tests::fixture::{self, Aligned, Prng};
 use crate::{localize, scratch_size, RangeScan, Scan};
 
@@ -387,6 +388,7 @@ fn every_flipped_section_byte_is_caught() {
                                     | SectionKind::Neighbors
                                     | SectionKind::Index
                                     | SectionKind::Decision
+                                    | SectionKind::Features
                             ),
                             "{} content is not checked by new(): {e:?}",
                             kind.name()
@@ -694,6 +696,223 @@ fn windows_section_size_is_checked() {
     }
     let b = reencode(|s| section_mut(s, SectionKind::Windows).clear());
     expect(&b, DbErrorKind::Size, Some("windows"));
+}
+
+/// The fixture's features section split into offsets (`u32`s), points
+/// and tangents (`f32`s) and descriptors (`u16`s), to edit and join again.
+struct FeatureParts {
+    offsets: Vec<u32>,
+    points: Vec<f32>,
+    tangents: Vec<f32>,
+    desc: Vec<u16>,
+}
+
+impl FeatureParts {
+    fn of(s: &Sections) -> FeatureParts {
+        let b = &s
+            .iter()
+            .find(|(k, _)| *k == SectionKind::Features)
+            .unwrap()
+            .1;
+        let sites = fixture::SITE_CELLS.len();
+        let offsets = <[u32]>::ref_from_bytes(&b[..4 * (sites + 1)])
+            .unwrap()
+            .to_vec();
+        let l = format::FeaturesLayout::new(sites as u64, offsets[sites] as u64).unwrap();
+        let f32s = |r: Range<usize>| <[f32]>::ref_from_bytes(&b[r]).unwrap().to_vec();
+        FeatureParts {
+            points: f32s(l.points_at..l.tangents_at),
+            tangents: f32s(l.tangents_at..l.desc_at),
+            desc: <[u16]>::ref_from_bytes(&b[l.desc_at..]).unwrap().to_vec(),
+            offsets,
+        }
+    }
+
+    /// The section: these parts laid out as the format says (the offsets
+    /// as they are, so a malformed list gives a malformed section).
+    fn bytes(&self) -> Vec<u8> {
+        let mut out = self.offsets.as_bytes().to_vec();
+        out.resize(out.len() + format::pad_len(out.len()), 0);
+        out.extend_from_slice(self.points.as_bytes());
+        out.extend_from_slice(self.tangents.as_bytes());
+        out.extend_from_slice(self.desc.as_bytes());
+        out
+    }
+}
+
+/// The fixture with its features section edited by `f`.
+fn edit_features(f: impl FnOnce(&mut FeatureParts)) -> Vec<u8> {
+    reencode(|s| {
+        let mut parts = FeatureParts::of(s);
+        f(&mut parts);
+        *section_mut(s, SectionKind::Features) = parts.bytes();
+    })
+}
+
+#[test]
+fn features_are_read_in_place_and_absent_reads_as_none() {
+    let bytes = tiny_db();
+    let buf = Aligned::new(&bytes);
+    let db = RefDb::new(buf.bytes()).unwrap();
+    let p = db.params();
+    let parts = FeatureParts::of(&fixture::sections());
+    for i in 0..db.site_count() {
+        let f = db.features(i).expect("the fixture stores features");
+        let n = f.points.len();
+        assert_eq!(n, (parts.offsets[i + 1] - parts.offsets[i]) as usize);
+        assert!(n >= 8 && n <= p.prep.max_points as usize, "{n}");
+        assert_eq!(f.tangents.len(), n);
+        assert_eq!(f.desc.len(), n * DESC_LEN);
+        // In place: the slices point into the file's bytes.
+        let sec = db.section(SectionKind::Features).as_ptr_range();
+        assert!(sec.contains(&(f.points.as_ptr() as *const u8)));
+        assert!(sec.contains(&(f.desc.as_ptr() as *const u8)));
+    }
+    assert!(db.features(db.site_count()).is_none());
+    assert!(db.features(usize::MAX).is_none());
+    // Without the section: a valid file, no features.
+    let b = reencode(|s| s.retain(|(k, _)| *k != SectionKind::Features));
+    let buf = Aligned::new(&b);
+    let db = RefDb::new(buf.bytes()).expect("features are optional");
+    db.verify().unwrap();
+    assert!((0..3).all(|i| db.features(i).is_none()));
+    // An empty one reads the same.
+    let b = reencode(|s| section_mut(s, SectionKind::Features).clear());
+    let buf = Aligned::new(&b);
+    assert!(RefDb::new(buf.bytes()).unwrap().features(0).is_none());
+}
+
+#[test]
+fn malformed_features_are_typed_errors() {
+    use DbErrorKind::*;
+    let ctx = "features";
+    // Truncated or padded: the length is exactly what the offsets say.
+    for delta in [-4i64, -16, 4, 16, -1] {
+        let b = reencode(|s| {
+            let v = section_mut(s, SectionKind::Features);
+            let n = (v.len() as i64 + delta) as usize;
+            v.resize(n, 0);
+        });
+        let e = expect(&b, Size, Some(ctx));
+        assert_ne!(e.expected, e.found);
+    }
+    // Shorter than its offsets.
+    let b = reencode(|s| section_mut(s, SectionKind::Features).truncate(8));
+    expect(&b, Size, Some(ctx));
+    // A last offset that promises more points than the file holds.
+    let b = edit_features(|f| f.offsets[3] += 1);
+    expect(&b, Size, Some(ctx));
+    // Offsets that do not start at 0, or decrease.
+    let b = edit_features(|f| f.offsets[0] = 1);
+    let e = expect(&b, Value, Some("features offsets[0]"));
+    assert_eq!(e.found_value(), Some(1.0));
+    let b = edit_features(|f| f.offsets[2] = f.offsets[1] - 1);
+    let e = expect(&b, Value, None);
+    assert!(e.context.starts_with("features offsets"), "{e}");
+    // A site with more points than max_points.
+    let b = edit_features(|f| {
+        let max = fixture::params().prep.max_points;
+        let add = max + 1 - (f.offsets[1] - f.offsets[0]);
+        for o in &mut f.offsets[1..] {
+            *o += add;
+        }
+        f.points.resize(f.points.len() + 2 * add as usize, 1.0);
+        f.tangents.resize(f.tangents.len() + 2 * add as usize, 0.0);
+        f.desc.resize(f.desc.len() + DESC_LEN * add as usize, 0);
+    });
+    let e = expect(&b, Value, None);
+    assert!(e.context.starts_with("features point count"), "{e}");
+    assert_eq!(e.expected, fixture::params().prep.max_points as u64);
+    // Non-finite points and tangents, tangents that are not unit vectors.
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        let b = edit_features(|f| f.points[5] = bad);
+        let e = expect(&b, Value, Some("features point"));
+        assert_eq!(e.found_value().map(|v| v.is_nan()), Some(bad.is_nan()));
+        let b = edit_features(|f| f.tangents[3] = bad);
+        expect(&b, Value, None);
+    }
+    let b = edit_features(|f| {
+        f.tangents[0] *= 1.01;
+        f.tangents[1] *= 1.01;
+    });
+    let e = expect(&b, Value, None);
+    assert!(e.context.starts_with("features tangent"), "{e}");
+    let b = edit_features(|f| {
+        f.tangents[0] = 0.0;
+        f.tangents[1] = 0.0;
+    });
+    expect(&b, Value, None);
+    // A descriptor row whose bins sum over DESC_SCALE (plus rounding).
+    let b = edit_features(|f| {
+        f.desc[DESC_LEN..2 * DESC_LEN].fill(u16::MAX);
+    });
+    let e = expect(&b, Value, None);
+    assert!(e.context.starts_with("features descriptor"), "{e}");
+    assert_eq!(e.found_value(), Some(DESC_LEN as f64 * 65535.0));
+    // At the bound it is fine: nothing downstream can overflow.
+    let b = edit_features(|f| {
+        let row = &mut f.desc[..DESC_LEN];
+        row.fill(0);
+        row[0] = u16::MAX;
+        row[1] = DESC_LEN as u16;
+    });
+    open(&b).expect("a row summing to DESC_SCALE + DESC_LEN");
+    // A site with no point at all is fine (SSM finds no pose there).
+    let b = edit_features(|f| {
+        let n = f.offsets[1] as usize;
+        f.points.drain(..2 * n);
+        f.tangents.drain(..2 * n);
+        f.desc.drain(..n * DESC_LEN);
+        for o in &mut f.offsets[1..] {
+            *o -= n as u32;
+        }
+    });
+    let buf = Aligned::new(&b);
+    let db = RefDb::new(buf.bytes()).expect("an empty site");
+    assert!(db.features(0).unwrap().points.is_empty());
+    assert_eq!(
+        db.features(1).unwrap().desc.len(),
+        db.features(1).unwrap().points.len() * DESC_LEN
+    );
+}
+
+#[test]
+fn localizing_with_and_without_stored_features_gives_identical_answers() {
+    let with = tiny_db();
+    let without = reencode(|s| s.retain(|(k, _)| *k != SectionKind::Features));
+    let (ba, bb) = (Aligned::new(&with), Aligned::new(&without));
+    let (a, b) = (
+        RefDb::new(ba.bytes()).unwrap(),
+        RefDb::new(bb.bytes()).unwrap(),
+    );
+    assert!(a.features(0).is_some() && b.features(0).is_none());
+    let mut answers = 0;
+    for (k, pose) in [
+        (0.9, 2.8, 0.7),
+        (3.5, 4.0, -1.0),
+        (2.0, 2.0, 2.5),
+        (4.5, 1.2, 0.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let ranges = fixture::full_scan_at(crate::Pose2::new(pose.0, pose.1, pose.2), 240);
+        let scan = Scan::Ranges(RangeScan {
+            angle_min: -core::f32::consts::PI,
+            angle_increment: 2.0 * core::f32::consts::PI / ranges.len() as f32,
+            range_min: 0.05,
+            range_max: fixture::RANGE_MAX,
+            ranges: &ranges,
+        });
+        let mut scratch = vec![0u8; scratch_size(a.params(), ranges.len())];
+        // Debug prints every float to its shortest round-trip form: equal
+        // strings are equal bits (the candidates included).
+        let la = format!("{:?}", localize(&a, &scan, &mut scratch));
+        let lb = format!("{:?}", localize(&b, &scan, &mut scratch));
+        assert_eq!(la, lb, "scan {k}");
+        answers += la.starts_with("Ok(") as usize;
+    }
+    assert!(answers >= 3, "{answers}");
 }
 
 #[test]

@@ -131,11 +131,18 @@ pub enum SectionKind {
     /// it was built with (evidence over the threshold, free-space check,
     /// not ambiguous).
     Decision = 12,
+    /// Optional reference side of spectral scan matching, per site: the
+    /// prepared points, their tangents and their descriptors, exactly as
+    /// the runtime computes them from the site's reference scan
+    /// ([`crate::localize::reference_features`]); laid out as
+    /// [`FeaturesLayout`] says. Added within version 1: a file without it
+    /// reads as before and the runtime computes them per candidate.
+    Features = 13,
 }
 
 impl SectionKind {
     /// All kinds, in file order.
-    pub const ALL: [SectionKind; 12] = [
+    pub const ALL: [SectionKind; 13] = [
         SectionKind::Meta,
         SectionKind::Params,
         SectionKind::Grid,
@@ -148,6 +155,7 @@ impl SectionKind {
         SectionKind::Windows,
         SectionKind::Index,
         SectionKind::Decision,
+        SectionKind::Features,
     ];
 
     /// From the raw value, if known.
@@ -170,12 +178,16 @@ impl SectionKind {
             SectionKind::Windows => "windows",
             SectionKind::Index => "index",
             SectionKind::Decision => "decision",
+            SectionKind::Features => "features",
         }
     }
 
     /// True for a section a file may leave out (it then reads as empty).
     pub fn optional(self) -> bool {
-        matches!(self, SectionKind::Index | SectionKind::Decision)
+        matches!(
+            self,
+            SectionKind::Index | SectionKind::Decision | SectionKind::Features
+        )
     }
 }
 
@@ -220,6 +232,60 @@ impl DecisionRecord {
             threshold: self.threshold.get(),
         }
     }
+}
+
+/// Bytes a features section stores per prepared point: its position and
+/// tangent (`[f32; 2]` each) and its descriptor (`DESC_LEN` `u16`s).
+pub const FEATURE_POINT_BYTES: usize =
+    2 * core::mem::size_of::<[f32; 2]>() + crate::ssm::DESC_LEN * core::mem::size_of::<u16>();
+
+/// Where the arrays of a features section ([`SectionKind::Features`]) lie,
+/// in bytes from the section's start: `sites + 1` `u32` offsets (prefix
+/// sums of each site's prepared point count), zero padding to a multiple
+/// of [`SECTION_ALIGN`], then `points` positions (`[f32; 2]`, m, sensor
+/// frame of the site), `points` unit tangents (`[f32; 2]`) and `points *
+/// DESC_LEN` descriptor bins (`u16`, see [`crate::ssm::descriptors`]).
+/// The one description of the layout: `mapc` writes by it, the reader
+/// checks and reads by it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FeaturesLayout {
+    /// Bytes of the offsets (`4 * (sites + 1)`).
+    pub offsets_len: usize,
+    /// Start of the positions (the offsets and their padding end here).
+    pub points_at: usize,
+    /// Start of the tangents.
+    pub tangents_at: usize,
+    /// Start of the descriptors.
+    pub desc_at: usize,
+    /// Length of the whole section (bytes).
+    pub len: usize,
+}
+
+impl FeaturesLayout {
+    /// The layout for `sites` sites with `points` prepared points in all;
+    /// `None` when it would not fit in memory's address range.
+    pub fn new(sites: u64, points: u64) -> Option<FeaturesLayout> {
+        let offsets_len = sites.checked_add(1)?.checked_mul(4)?;
+        let points_at = offsets_len.checked_add(pad_len_u64(offsets_len))?;
+        let pair = core::mem::size_of::<[f32; 2]>() as u64;
+        let tangents_at = points_at.checked_add(points.checked_mul(pair)?)?;
+        let desc_at = tangents_at.checked_add(points.checked_mul(pair)?)?;
+        let len = points_at.checked_add(points.checked_mul(FEATURE_POINT_BYTES as u64)?)?;
+        let us = |v: u64| usize::try_from(v).ok();
+        Some(FeaturesLayout {
+            offsets_len: us(offsets_len)?,
+            points_at: us(points_at)?,
+            tangents_at: us(tangents_at)?,
+            desc_at: us(desc_at)?,
+            len: us(len)?,
+        })
+    }
+}
+
+/// [`pad_len`] in `u64` (section lengths computed from untrusted counts).
+const fn pad_len_u64(len: u64) -> u64 {
+    let a = SECTION_ALIGN as u64;
+    (a - len % a) % a
 }
 
 /// Start of the index section (16 bytes).

@@ -138,6 +138,9 @@ pub struct BuildOpts {
     /// Accept a pose when its confidence (probability that it is right, 0-1) is at least this; stored in the .refdb.
     #[arg(long, value_name = "P", default_value_t = refloc::Decision::DEFAULT.threshold)]
     pub accept_confidence: f32,
+    /// Leave out the stored reference side of SSM (each site's prepared points, tangents and descriptors, up to 80 bytes per point: 12.8 KB per site with 160 points); the runtime then computes it for every candidate (slower queries, same answers, smaller file for flash-constrained targets).
+    #[arg(long)]
+    pub no_ssm_features: bool,
     /// Build the coarse-search index (sublinear ranking of the sites) for maps with at least this many sites; smaller maps are ranked exhaustively.
     #[arg(long, value_name = "SITES", default_value_t = mapc::compiler::index::IndexOptions::default().min_sites)]
     pub index_min_sites: usize,
@@ -179,8 +182,9 @@ impl clap::ValueEnum for SelectionArg {
 #[derive(clap::Args, Debug, Clone)]
 pub struct DbLimitArgs {
     /// Largest database written, in bytes: the reference sites' data (about
-    /// 16 KB per site with the default sensor and windows), the grid and the
-    /// distance map, checked once the sites are placed and before their
+    /// 16 KB per site with the default sensor and windows, and up to 12.8 KB
+    /// more of stored SSM features unless --no-ssm-features), the grid and
+    /// the distance map, checked once the sites are placed and before their
     /// scans and histograms are computed [default: 1073741824 = 1 GiB].
     #[arg(
         long,
@@ -223,6 +227,7 @@ impl BuildOpts {
             through_run: self.through_run.unwrap_or(d.through_run),
             occlusion_fit: self.occlusion_fit.unwrap_or(d.occlusion_fit),
             accept_confidence: self.accept_confidence,
+            ssm_features: !self.no_ssm_features,
             index: mapc::compiler::index::IndexOptions {
                 min_sites: self.index_min_sites,
                 beam: self.index_beam,

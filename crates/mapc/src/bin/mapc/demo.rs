@@ -134,6 +134,7 @@ fn build_opts(a: &Args) -> BuildOpts {
         through_run: None,
         occlusion_fit: None,
         accept_confidence: refloc::Decision::DEFAULT.threshold,
+        no_ssm_features: false,
         index_min_sites: mapc::compiler::index::IndexOptions::default().min_sites,
         index_beam: mapc::compiler::index::IndexOptions::default().beam,
         index_leaves: mapc::compiler::index::IndexOptions::default().leaves,

@@ -34,25 +34,135 @@ fn quick() -> BuildConfig {
 }
 
 /// [`compile::db_size`] of a build of the 60 x 40 room.
-fn size_of_build(out: &BuildOutput) -> compile::DbSize {
+fn size_of_build(out: &BuildOutput, features: bool) -> compile::DbSize {
     let links = out.sites.iter().map(|s| s.neighbours.len() as u64).sum();
-    compile::db_size(&out.params, 60, 40, out.sites.len(), links)
+    compile::db_size(&out.params, 60, 40, out.sites.len(), links, features)
+}
+
+/// The bytes of a build's section `k` (empty when it has none).
+fn section_of(out: &BuildOutput, k: SectionKind) -> &[u8] {
+    out.sections
+        .iter()
+        .find(|(kind, _)| *kind == k)
+        .map_or(&[], |(_, b)| b.as_slice())
 }
 
 #[test]
 fn db_size_is_the_bytes_of_the_sections_it_counts() {
-    let out = build(&room(0.05), &quick()).unwrap();
-    let counted: usize = out
-        .sections
-        .iter()
-        .filter(|(k, _)| !matches!(k, SectionKind::Index | SectionKind::Manifest))
-        .map(|(_, b)| b.len())
-        .sum();
-    let size = size_of_build(&out);
-    assert_eq!(size.total, counted as u64);
-    assert_eq!(size.sites, out.sites.len() as u64);
-    // 362 beams, a 3,072-cell histogram and the two window widths.
-    assert!(size.per_site > 16_000 && size.per_site < 17_000, "{size:?}");
+    for features in [false, true] {
+        let cfg = BuildConfig {
+            ssm_features: features,
+            ..quick()
+        };
+        let out = build(&room(0.05), &cfg).unwrap();
+        let counted: usize = out
+            .sections
+            .iter()
+            .filter(|(k, _)| !matches!(k, SectionKind::Index | SectionKind::Manifest))
+            .map(|(_, b)| b.len())
+            .sum();
+        let size = size_of_build(&out, features);
+        // Exact but for the features section, counted at max_points per site.
+        let stored = section_of(&out, SectionKind::Features).len() as u64;
+        assert_eq!(size.total - size.features, counted as u64 - stored);
+        assert!(stored <= size.features, "{stored} {size:?}");
+        assert_eq!(size.sites, out.sites.len() as u64);
+        // 362 beams, a 3,072-cell histogram and the two window widths; with
+        // the features up to 160 points of 80 bytes and an offset.
+        let extra = if features { 4 + 160 * 80 } else { 0 };
+        assert!(
+            size.per_site > 16_000 + extra && size.per_site < 17_000 + extra,
+            "{size:?}"
+        );
+        assert_eq!(features, stored > 0, "{stored}");
+    }
+}
+
+#[test]
+fn stored_features_are_the_runtimes_and_change_no_answer() {
+    let src = room(0.05);
+    let with = build(&src, &quick()).unwrap();
+    let without = build(
+        &src,
+        &BuildConfig {
+            ssm_features: false,
+            ..quick()
+        },
+    )
+    .unwrap();
+    // The same sections but the features and the manifest (which records
+    // the option).
+    let others = |o: &BuildOutput| {
+        o.sections
+            .iter()
+            .filter(|(k, _)| !matches!(k, SectionKind::Features | SectionKind::Manifest))
+            .cloned()
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(others(&with), others(&without));
+    let image = |o: &BuildOutput| {
+        let refs: Vec<(SectionKind, &[u8])> =
+            o.sections.iter().map(|(k, b)| (*k, b.as_slice())).collect();
+        let mut out = Vec::new();
+        refloc::format::encode(&refs, |b: &[u8]| -> Result<(), ()> {
+            out.extend_from_slice(b);
+            Ok(())
+        })
+        .unwrap();
+        // A u32-backed copy: the reader needs 4-byte aligned arrays.
+        let mut words = vec![0u32; out.len().div_ceil(4)];
+        zerocopy::IntoBytes::as_mut_bytes(&mut words[..])[..out.len()].copy_from_slice(&out);
+        (words, out.len())
+    };
+    let (wa, la) = image(&with);
+    let (wb, lb) = image(&without);
+    let a = refloc::RefDb::new(&zerocopy::IntoBytes::as_bytes(&wa[..])[..la]).unwrap();
+    let b = refloc::RefDb::new(&zerocopy::IntoBytes::as_bytes(&wb[..])[..lb]).unwrap();
+    a.verify().unwrap();
+    // Every site's stored features are what the runtime computes.
+    let p = a.params();
+    let m = p.prep.max_points as usize;
+    for i in 0..a.site_count() {
+        let f = a.features(i).expect("stored");
+        assert!(b.features(i).is_none());
+        let mut dense = vec![[0f32; 2]; p.sensor.beams as usize];
+        let (mut pts, mut tan) = (vec![[0f32; 2]; m], vec![[0f32; 2]; m]);
+        let mut desc = vec![0u16; m * refloc::ssm::DESC_LEN];
+        let n = refloc::localize::reference_features(
+            a.scan(i),
+            p,
+            &mut dense,
+            &mut pts,
+            &mut tan,
+            &mut desc,
+        );
+        assert!(n >= 8, "site {i}: {n} points");
+        assert_eq!(f.points, &pts[..n]);
+        assert_eq!(f.tangents, &tan[..n]);
+        assert_eq!(f.desc, &desc[..n * refloc::ssm::DESC_LEN]);
+    }
+    // Scans from a few poses localize to identical answers either way.
+    let lidar = compile::ref_lidar(p);
+    let grid = a.grid();
+    let mut scratch = vec![0u8; refloc::scratch_size(p, lidar.beams)];
+    for (k, pose) in [(0.4, 0.5, 0.3), (2.2, 1.1, -2.0), (1.0, 1.5, 1.2)]
+        .into_iter()
+        .enumerate()
+    {
+        let pose = refloc::Pose2::new(pose.0, pose.1, pose.2);
+        let ranges = crate::compiler::sim::virtual_scan(&grid, &a.frame(), &pose, &lidar);
+        let scan = refloc::Scan::Ranges(refloc::RangeScan {
+            angle_min: lidar.angle_min,
+            angle_increment: lidar.angle_increment,
+            range_min: lidar.range_min,
+            range_max: lidar.range_max,
+            ranges: &ranges,
+        });
+        let la = format!("{:?}", refloc::localize(&a, &scan, &mut scratch));
+        let lb = format!("{:?}", refloc::localize(&b, &scan, &mut scratch));
+        assert_eq!(la, lb, "scan {k}");
+        assert!(la.starts_with("Ok("), "scan {k}: {la}");
+    }
 }
 
 #[test]
@@ -60,7 +170,7 @@ fn a_database_over_max_db_bytes_is_refused_with_its_size() {
     let src = room(0.05);
     let cfg = quick();
     let out = build(&src, &cfg).unwrap();
-    let total = size_of_build(&out).total;
+    let total = size_of_build(&out, true).total;
     // Exactly the size passes, one byte less is refused.
     let at = BuildConfig {
         max_db_bytes: total,
@@ -76,7 +186,7 @@ fn a_database_over_max_db_bytes_is_refused_with_its_size() {
         matches!(e, crate::compiler::error::BuildError::TooLarge { total: t, limit, .. } if t == total && limit == total - 1)
     );
     let e = e.to_string();
-    assert!(e.contains(&format!("at least {total} bytes")), "{e}");
+    assert!(e.contains(&format!("about {total} bytes")), "{e}");
     assert!(
         e.contains(&format!("the limit is {} bytes (--max-db-bytes", total - 1)),
         "{e}"
