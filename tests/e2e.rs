@@ -281,6 +281,71 @@ fn localize_a_batch_of_json_lines() {
     assert!(String::from_utf8_lossy(&o.stdout).contains("yes"));
 }
 
+/// `--no-ssm-features` leaves the features section out (a smaller file,
+/// recorded in the manifest); localizing with either database gives the
+/// same answers, field for field but the time.
+#[test]
+fn a_database_without_stored_ssm_features_gives_the_same_answers() {
+    let dir = tempfile::tempdir().unwrap();
+    let without = dir.path().join("nofeat.refdb");
+    std::fs::rename(built(dir.path(), &["--no-ssm-features"]), &without).unwrap();
+    let with = built(dir.path(), &[]);
+    let info = |db: &Path| {
+        let o = mapc(&["info", db.to_str().unwrap(), "--json"], dir.path());
+        assert!(o.status.success(), "{}", text(&o));
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
+    };
+    let (ia, ib) = (info(&with), info(&without));
+    let features = |j: &serde_json::Value| {
+        j["sections"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["kind"] == "features")
+            .expect("info lists the features section")["bytes"]
+            .as_u64()
+            .unwrap()
+    };
+    let sites = ia["sites"].as_u64().unwrap();
+    // Offsets, then 80 bytes per prepared point, at most 160 per site.
+    assert!(features(&ia) > sites * 8 * 80, "{ia}");
+    assert!(features(&ia) <= 16 + sites * (4 + 160 * 80), "{ia}");
+    assert_eq!(features(&ib), 0);
+    // The section, its table entry and the padding of both (the manifests
+    // differ by a letter: "ssm_features": true, or false).
+    let grew = ia["file_bytes"].as_u64().unwrap() - ib["file_bytes"].as_u64().unwrap();
+    assert!(
+        grew >= features(&ia) && grew <= features(&ia) + 64,
+        "{grew} {}",
+        features(&ia)
+    );
+    assert_eq!(ia["manifest"]["options"]["ssm_features"], true);
+    assert_eq!(ib["manifest"]["options"]["ssm_features"], false);
+    let o = mapc(&["verify", without.to_str().unwrap()], dir.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let (_, lines) = common::jsonl_scans(&std::fs::read(&with).unwrap(), 8, 5);
+    let input = dir.path().join("scans.jsonl");
+    std::fs::write(&input, lines).unwrap();
+    let answers = |db: &Path| {
+        let o = mapc(
+            &["localize", db.to_str().unwrap(), input.to_str().unwrap()],
+            dir.path(),
+        );
+        assert!(o.status.success(), "{}", text(&o));
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .map(|l| {
+                let mut v: serde_json::Value = serde_json::from_str(l).unwrap();
+                v.as_object_mut().unwrap().remove("time_us");
+                v
+            })
+            .collect::<Vec<_>>()
+    };
+    let (a, b) = (answers(&with), answers(&without));
+    assert_eq!(a.len(), 8);
+    assert_eq!(a, b);
+}
+
 #[test]
 fn localize_against_several_maps_says_which_map() {
     let dir = tempfile::tempdir().unwrap();
