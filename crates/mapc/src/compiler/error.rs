@@ -49,8 +49,8 @@ pub enum BuildError {
     #[error(
         "the database would take about {total} bytes: {sites} reference sites of up to \
          {per_site} bytes each (for {free_cells} free cells at {resolution} m per cell) plus the \
-         grid and distance map; the limit is {limit} bytes (--max-db-bytes raises it; \
-         --no-ssm-features leaves out the stored SSM features)"
+         grid and distance map; the limit is {limit} bytes (--max-db-bytes raises it), and \
+         --no-ssm-features leaves out the stored SSM features"
     )]
     TooLarge {
         /// Bytes of every section but the index and the manifest, the
