@@ -27,11 +27,18 @@ impl<'a> DistMap<'a> {
     /// The distance map stored in `db`.
     pub fn of<D: AsRef<[u8]>>(db: &'a crate::RefDb<D>) -> DistMap<'a> {
         let (width, height) = db.grid_size();
-        let frame = db.frame();
+        DistMap::new(width, height, db.dist(), db.frame())
+    }
+
+    /// A distance map of `width x height` cells, one byte each in `data`
+    /// (row `cy = 0` first, see [`crate::format::dist_cells`]), placed by
+    /// `frame`. Cells missing from a short `data` read as far from any
+    /// surface.
+    pub fn new(width: u32, height: u32, data: &'a [u8], frame: MapFrame) -> DistMap<'a> {
         DistMap {
             width,
             height,
-            data: db.dist(),
+            data,
             frame,
             rot: (
                 libm::sinf(frame.origin.theta),
@@ -50,6 +57,21 @@ impl<'a> DistMap<'a> {
             (c * dx + s * dy) / f.resolution,
             (-s * dx + c * dy) / f.resolution,
         ]
+    }
+
+    /// A lower bound (cells) of the distance from any point of cell `(cx,
+    /// cy)` to any obstacle cell, for [`crate::raycast::cast_dir_clear`]:
+    /// the stored distance less [`CLEARANCE_MARGIN_CELLS`]. Outside the
+    /// grid, 0.
+    #[inline]
+    pub fn clearance(&self, cx: u32, cy: u32) -> f32 {
+        if cx >= self.width || cy >= self.height {
+            return 0.0;
+        }
+        let i = cy as usize * self.width as usize + cx as usize;
+        self.data
+            .get(i)
+            .map_or(0.0, |&v| dist_cells(v) - CLEARANCE_MARGIN_CELLS)
     }
 
     #[inline]
@@ -116,6 +138,17 @@ impl<'a> DistMap<'a> {
         Some((d, [c * gu - s * gv, s * gu + c * gv]))
     }
 }
+
+/// What a cell's stored distance may exceed the distance from any point of
+/// the cell to any obstacle cell by (cells). The stored value is the
+/// distance between the cell's centre and the nearest obstacle cell's
+/// centre less half a cell (`mapc`'s `dist_section`), rounded to 1/16 of a
+/// cell; a point of the cell lies within `sqrt(2) / 2` of its centre, and
+/// so does any point of the obstacle cell of its own: the gap is at least
+/// `D + 0.5 - sqrt(2) - 1/16 = D - 0.977`. The distance transform counts
+/// every beam-stopping cell (and the grid's border) as an obstacle, so this
+/// bounds the distance to the cells a cast stops at.
+pub const CLEARANCE_MARGIN_CELLS: f32 = 1.0;
 
 /// `floor(x)` of a finite `x` (bounded by the map size here) as an integer,
 /// exactly, without a libm call: truncate, then step down for negatives.

@@ -17,7 +17,7 @@
 //! test forgives beams at grazing incidence, whose range error under a small
 //! pose error is large but whose endpoint still lies on the surface.
 
-use crate::raycast::{cast, BitGrid, Occupancy};
+use crate::raycast::{cast_dir, cast_dir_clear, BitGrid, Occupancy};
 
 /// The most a beam adds to the vicinity score M: `m = HIT_SCORE - d^2 /
 /// (2 sigma_d^2)` for a beam whose range is off by `d` (paper eq. 23, where
@@ -27,6 +27,15 @@ pub const HIT_SCORE: f32 = 4.5;
 
 /// Beams count as fitting the map within this many sigma_d (paper eq. 23).
 pub const FIT_SIGMAS: f32 = 3.0;
+
+/// The verification's casts cross open space in steps of the distance
+/// map's clearance while it is at least this many cells
+/// ([`crate::raycast::cast_dir_clear`]); nearer surfaces they go cell by
+/// cell. A jump's next position waits on the clearance it reads (a byte
+/// per cell, often not in cache), where the exact traversal's next cell
+/// does not wait on its bit, so a jump pays only when it skips several
+/// cells (docs/performance.md, "Verification casts across open space").
+pub const OPEN_JUMP_CELLS: f32 = 6.0;
 use crate::refine::DistMap;
 use crate::{MapFrame, Pose2, RefDb};
 
@@ -90,6 +99,11 @@ pub struct Verifier<'a, G: Occupancy + ?Sized> {
     /// Distance to the nearest surface, for the through-wall test (`None`
     /// skips it: [`Vicinity::through`] stays 0).
     pub dist: Option<DistMap<'a>>,
+    /// The distance map the casts cross open space with
+    /// ([`crate::raycast::cast_dir_clear`], jumps of at least
+    /// [`OPEN_JUMP_CELLS`]); `None` traverses every cell (the same answers,
+    /// more work).
+    pub open: Option<DistMap<'a>>,
     /// Bound of the virtual beams (m).
     pub range_max: f32,
     /// sigma_d (m).
@@ -112,6 +126,7 @@ impl<'a> Verifier<'a, BitGrid<'a>> {
             grid,
             frame: db.frame(),
             dist: (p.verify.through_max > 0.0).then(|| DistMap::of(db)),
+            open: Some(DistMap::of(db)),
             range_max,
             sigma_d: p.verify.sigma_d,
             accept_ratio: p.verify.accept_ratio,
@@ -149,7 +164,21 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
             // A surface farther than r + lim only makes the beam short, as
             // no surface at all does: the cast stops a cell beyond that.
             let reach = ((r + lim) * inv_res + 1.0).min(max_cells);
-            match cast(self.grid, uv[0], uv[1], ang, reach) {
+            let (dy, dx) = (libm::sinf(ang), libm::cosf(ang));
+            let hit = match &self.open {
+                Some(dm) => cast_dir_clear(
+                    self.grid,
+                    uv[0],
+                    uv[1],
+                    dx,
+                    dy,
+                    reach,
+                    OPEN_JUMP_CELLS,
+                    |cx, cy| dm.clearance(cx, cy),
+                ),
+                None => cast_dir(self.grid, uv[0], uv[1], dx, dy, reach),
+            };
+            match hit {
                 Some(t) => {
                     let v = t * frame.resolution;
                     let d = libm::fabsf(v - r);

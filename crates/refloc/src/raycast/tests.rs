@@ -455,3 +455,89 @@ fn traverse_visits_edge_adjacent_cells_in_order() {
     });
     assert_eq!(n, 0);
 }
+
+/// The exact clearance of each cell: the distance (cells) from the cell's
+/// closed box to the nearest blocked cell's, `f32::INFINITY` with none.
+fn clearance_brute(g: &VecGrid) -> Vec<f32> {
+    let blocked: Vec<(i64, i64)> = (0..g.h as i64)
+        .flat_map(|y| (0..g.w as i64).map(move |x| (x, y)))
+        .filter(|&(x, y)| g.get(x, y) == Some(true))
+        .collect();
+    let mut out = Vec::with_capacity((g.w * g.h) as usize);
+    for cy in 0..g.h as i64 {
+        for cx in 0..g.w as i64 {
+            let gap = blocked
+                .iter()
+                .map(|&(x, y)| {
+                    let gx = ((x - cx).abs() - 1).max(0) as f32;
+                    let gy = ((y - cy).abs() - 1).max(0) as f32;
+                    libm::sqrtf(gx * gx + gy * gy)
+                })
+                .fold(f32::INFINITY, f32::min);
+            out.push(gap);
+        }
+    }
+    out
+}
+
+#[test]
+fn cast_dir_clear_jumps_open_space_and_matches_the_reference() {
+    let mut rng = Prng::new(13);
+    let mut jumps = 0usize;
+    let mut rays = 0usize;
+    for _ in 0..25 {
+        let (w, h) = (20 + rng.below(60) as u32, 20 + rng.below(60) as u32);
+        // Sparse grids leave open space to jump across.
+        let density = rng.range(0.0, 0.04);
+        let g = VecGrid::random(&mut rng, w, h, density);
+        let words = g.words();
+        let bits = BitGrid::new(w, h, &words).unwrap();
+        let clear = clearance_brute(&g);
+        for _ in 0..80 {
+            let (u, v) = (start_coord(&mut rng, w), start_coord(&mut rng, h));
+            let angle = rng.range(-PI, PI);
+            let (dx, dy) = (libm::cosf(angle), libm::sinf(angle));
+            let max = if rng.below(2) == 0 {
+                1e4
+            } else {
+                rng.range(0.0, 60.0)
+            };
+            let want = reference(&g, u, v, dx, dy, max);
+            // The tightest bound (the exact clearance) and a looser one.
+            for slack in [0.0f32, 0.5] {
+                let used = core::cell::Cell::new(0usize);
+                let got = cast_dir_clear(&bits, u, v, dx, dy, max, 1.0, |cx, cy| {
+                    used.set(used.get() + 1);
+                    clear[(cy * w + cx) as usize] - slack
+                });
+                assert!(
+                    accepted(got, &want, TOL),
+                    "ray from ({u}, {v}) angle {angle} max {max} in a {w}x{h} grid \
+                     (slack {slack}): got {got:?}, reference {want:?}"
+                );
+                jumps += used.get();
+                rays += 1;
+            }
+        }
+    }
+    // Most rays start in open space and jump at least once.
+    assert!(jumps > rays, "{jumps} clearance reads for {rays} rays");
+}
+
+#[test]
+fn cast_dir_clear_without_jumps_is_cast_dir() {
+    let mut rng = Prng::new(14);
+    let g = VecGrid::random(&mut rng, 30, 30, 0.1);
+    let words = g.words();
+    let bits = BitGrid::new(30, 30, &words).unwrap();
+    for _ in 0..200 {
+        let (u, v) = (start_coord(&mut rng, 30), start_coord(&mut rng, 30));
+        let angle = rng.range(-PI, PI);
+        let (dx, dy) = (libm::cosf(angle), libm::sinf(angle));
+        // A clearance below the least jump, or no jumps at all.
+        for (min_jump, c) in [(1.0, 0.5), (0.0, 100.0), (f32::INFINITY, 100.0)] {
+            let got = cast_dir_clear(&bits, u, v, dx, dy, 50.0, min_jump, |_, _| c);
+            assert_eq!(got, cast_dir(&bits, u, v, dx, dy, 50.0));
+        }
+    }
+}

@@ -109,3 +109,73 @@ fn distance_field_walls_the_border() {
     // Unknown cells are free now, but the ring is still an obstacle.
     assert_eq!(d2.sq[at(1, 5)], 1.0);
 }
+
+/// The runtime's verification casts jump across open space by
+/// `refloc::refine::DistMap::clearance` (refloc::raycast::cast_dir_clear):
+/// on the distance section the compiler writes, that must never exceed the
+/// true gap between a cell and the nearest beam-stopping cell.
+#[test]
+fn the_distance_section_bounds_the_runtime_clearance() {
+    use refloc::raycast::{BitGrid, Occupancy};
+    let mut rng = Rng::new(21);
+    let mut jumpable = 0;
+    for round in 0..12 {
+        let (w, h) = (10 + rng.below(50) as u32, 10 + rng.below(50) as u32);
+        let density = [0.002, 0.01, 0.05][round % 3];
+        let cells = (0..w * h)
+            .map(|_| {
+                let x = rng.uniform();
+                if x < density {
+                    Cell::Occupied
+                } else if x < 2.0 * density {
+                    Cell::Unknown
+                } else {
+                    Cell::Free
+                }
+            })
+            .collect();
+        let grid = OccupancyGrid::from_cells(w, h, 0.05, [0.0; 3], cells);
+        for unknown_blocks in [false, true] {
+            // As the pipeline and compile::compile_with do.
+            let df = DistanceField::from_grid(&grid, unknown_blocks);
+            let words = grid.blocked_bits(unknown_blocks);
+            let bits = BitGrid::new(w, h, &words).unwrap();
+            let (wu, hu) = (w as usize, h as usize);
+            let sq_in = squared_edt(wu, hu, |i| !bits.blocked((i % wu) as u32, (i / wu) as u32));
+            let bytes = crate::compiler::compile::dist_section(&df.sq, &sq_in);
+            let frame = refloc::MapFrame {
+                resolution: 0.05,
+                origin: refloc::Pose2::new(0.0, 0.0, 0.0),
+            };
+            let dm = refloc::refine::DistMap::new(w, h, &bytes, frame);
+            let blocked: Vec<(i64, i64)> = (0..h)
+                .flat_map(|y| (0..w).map(move |x| (x, y)))
+                .filter(|&(x, y)| bits.blocked(x, y))
+                .map(|(x, y)| (x as i64, y as i64))
+                .collect();
+            for cy in 0..h {
+                for cx in 0..w {
+                    let c = dm.clearance(cx, cy);
+                    if c <= 0.0 {
+                        continue;
+                    }
+                    jumpable += 1;
+                    let gap = blocked
+                        .iter()
+                        .map(|&(x, y)| {
+                            let gx = ((x - cx as i64).abs() - 1).max(0) as f32;
+                            let gy = ((y - cy as i64).abs() - 1).max(0) as f32;
+                            (gx * gx + gy * gy).sqrt()
+                        })
+                        .fold(f32::INFINITY, f32::min);
+                    assert!(
+                        c <= gap,
+                        "{w}x{h} unknown_blocks {unknown_blocks}: cell ({cx}, {cy}) \
+                         clearance {c} > gap {gap}"
+                    );
+                }
+            }
+        }
+    }
+    assert!(jumpable > 1000, "{jumpable} cells with a clearance");
+}
