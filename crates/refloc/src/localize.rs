@@ -711,8 +711,13 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     pub fn verify_pose(&self, sensor: &Pose2) -> verify::Vicinity {
         let verifier = verify::Verifier::new(self.db, &self.grid, self.scan.range_max);
         let n = self.scan.beams;
-        let beams = self.b.in_ang[..n].iter().copied();
-        verifier.score(sensor, beams.zip(self.b.in_rng[..n].iter().copied()))
+        // A beam with a return points along its point (`in_pts` is the
+        // range times the unit direction); the others are skipped.
+        let beams = self.b.in_pts[..n]
+            .iter()
+            .zip(&self.b.in_rng[..n])
+            .map(|(p, &r)| ([p[0] / r, p[1] / r], r));
+        verifier.score_dirs(sensor, beams)
     }
 
     /// The confidence's spread feature ([`Candidate::spread`]) of a sensor

@@ -493,7 +493,7 @@ pub fn affinity(w: &[f32; 3], drho: f32, dth2: f32) -> f32 {
     if z < AFFINITY_FLOOR_Z {
         return 0.0;
     }
-    1.0 / (1.0 + libm::expf(-z))
+    1.0 / (1.0 + crate::math::exp(-z))
 }
 
 /// Affinities below this are treated as 0 (not stored).

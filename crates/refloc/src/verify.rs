@@ -140,7 +140,24 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
     /// Scores `sensor` (map frame) for input beams given as (angle in the
     /// sensor frame (rad), range (m)) pairs; non-finite ranges are skipped.
     pub fn score(&self, sensor: &Pose2, beams: impl Iterator<Item = (f32, f32)>) -> Vicinity {
+        self.score_dirs(
+            sensor,
+            beams.map(|(a, r)| ([libm::cosf(a), libm::sinf(a)], r)),
+        )
+    }
+
+    /// [`Verifier::score`] for beams given as (unit direction in the sensor
+    /// frame, range (m)) pairs: no trigonometry per beam.
+    pub fn score_dirs(
+        &self,
+        sensor: &Pose2,
+        beams: impl Iterator<Item = ([f32; 2], f32)>,
+    ) -> Vicinity {
         let frame = &self.frame;
+        // Sensor frame to grid axes, and to the map frame (for end points).
+        let to_cells = frame.angle_to_cells(sensor.theta);
+        let (cs, cc) = (libm::sinf(to_cells), libm::cosf(to_cells));
+        let (ms, mc) = (libm::sinf(sensor.theta), libm::cosf(sensor.theta));
         let uv = frame.to_cells([sensor.x, sensor.y]);
         let max_cells = self.range_max / frame.resolution;
         let inv_res = 1.0 / frame.resolution;
@@ -153,18 +170,16 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
         let mut through = 0u32;
         let min_run = self.through_run.max(1);
         let mut run = 0u32;
-        for (a, r) in beams {
+        for (u, r) in beams {
             if !r.is_finite() {
                 continue;
             }
             n += 1;
-            let heading = sensor.theta + a;
             let mut through_here = false;
-            let ang = frame.angle_to_cells(heading);
             // A surface farther than r + lim only makes the beam short, as
             // no surface at all does: the cast stops a cell beyond that.
             let reach = ((r + lim) * inv_res + 1.0).min(max_cells);
-            let (dy, dx) = (libm::sinf(ang), libm::cosf(ang));
+            let (dx, dy) = (cc * u[0] - cs * u[1], cs * u[0] + cc * u[1]);
             let hit = match &self.open {
                 Some(dm) => cast_dir_clear(
                     self.grid,
@@ -191,8 +206,8 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
                         if r - v >= self.through_excess {
                             if let Some(dm) = &self.dist {
                                 let end = [
-                                    sensor.x + r * libm::cosf(heading),
-                                    sensor.y + r * libm::sinf(heading),
+                                    sensor.x + r * (mc * u[0] - ms * u[1]),
+                                    sensor.y + r * (ms * u[0] + mc * u[1]),
                                 ];
                                 // Outside the grid counts as away from surfaces.
                                 let off = dm.sample(end).is_none_or(|(e, _)| libm::fabsf(e) >= lim);
