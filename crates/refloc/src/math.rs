@@ -1,12 +1,13 @@
 //! Small deterministic float helpers (pure arithmetic, identical on every
 //! target, so the compiler and a robot compute bit-identical histograms).
 
-/// `e^x` by pure arithmetic: `2^k * e^(f ln 2)` with `k` the nearest
-/// integer to `x log2(e)` and a degree-6 Taylor polynomial for the rest
-/// (`|x - k ln 2| <= 0.347`). Relative error below 5e-7 for `|x| <= 80`; `x`
-/// is clamped to that range (NaN gives NaN). About a third of the work of
-/// `libm::expf`, which the SSM affinity's logistic (eq. 4) called for
-/// every pair of correspondences.
+/// `e^x` by pure arithmetic: `2^k e^y` with `k` the nearest integer to
+/// `x log2(e)`, `y = x - k ln 2` (`|y| <= 0.347`) and a degree-6 Taylor
+/// polynomial for `e^y`. Relative error below 5e-7 for `|x| <= 80`; `x` is
+/// clamped to that range (NaN gives NaN). Inlined and branch-light, for
+/// the SSM affinity's logistic (eq. 4), which runs for every pair of
+/// correspondences that passes the rho test (`libm::expf` there was 5% of
+/// a real query's cycles: docs/performance.md).
 #[inline]
 pub fn exp(x: f32) -> f32 {
     if x.is_nan() {
