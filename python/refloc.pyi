@@ -47,6 +47,9 @@ class Localization:
     vicinity_threshold: float
     evidence: float
     valid_points: int
+    #: Heading change (rad) over the scanner's sweep the pose was fitted
+    #: with (a scan taken while turning); 0.0 for a rigid fit.
+    skew: float
     candidates: int
     @property
     def pose(self) -> Tuple[float, float, float]:

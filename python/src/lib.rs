@@ -530,6 +530,9 @@ struct Localization {
     evidence: f32,
     /// Input beams with a return.
     valid_points: u32,
+    /// Heading change (rad) over the scanner's sweep the pose was fitted
+    /// with (a scan taken while turning); 0 for a rigid fit.
+    skew: f32,
     /// Candidates examined.
     candidates: usize,
     cov: Option<[f32; 9]>,
@@ -560,6 +563,7 @@ impl Localization {
             vicinity_threshold: l.vicinity_threshold,
             evidence: l.evidence,
             valid_points: l.valid_points,
+            skew: l.skew,
             candidates: l.candidates.len(),
             cov: l.covariance,
         }

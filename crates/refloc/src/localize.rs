@@ -212,6 +212,11 @@ pub struct Localization<'s> {
     pub pose: Pose2,
     /// Sensor pose in the map frame.
     pub sensor_pose: Pose2,
+    /// The heading change (rad) over the scanner's sweep that the answer
+    /// was fitted with, when a scan taken while turning fitted much better
+    /// so ([`Localizer::select`], [`refine::skew_fit`]); the poses are
+    /// those at the middle of the sweep. 0 for a rigid fit.
+    pub skew: f32,
     /// The site the pose came through.
     pub site: u32,
     /// Coarse rank of that site (0 = best).
@@ -436,6 +441,19 @@ fn carve<'a>(d: &Dims, ar: &mut Arena<'a>) -> Option<Bufs<'a>> {
 /// scans whose right pose other sites also found; 53-68% of all candidates
 /// do), checked on the CSAIL log held out (docs/performance.md).
 pub const REFINE_GATE: f32 = 0.1;
+
+/// The answer is refitted with the scan's skew (a scanner that turned
+/// while it scanned, [`refine::skew_fit`]) only when the skewed fit's
+/// robust cost is at most this share of the rigid fit's: the turn must
+/// explain at least half of what the rigid fit leaves. Real scans of the
+/// shared logs (scanners sweeping in 13-27 ms) gain little from a skew
+/// (cost ratio median 0.91-0.98, 10th percentile 0.69-0.79 for right
+/// answers, 0.80 and more for wrong ones on Intel and ACES); scans
+/// simulated while turning at up to 1 rad/s over a 0.1 s sweep gain a
+/// lot (median 0.13-0.17, and 0.02-0.04 for the right answers the rigid
+/// fit got rejected). Half is a round margin between them
+/// (docs/results.md, "A scan skew for the answer").
+pub const SKEW_COST_RATIO: f32 = 0.5;
 
 /// The least number of resampled query points the fine stage works with.
 pub const MIN_PREPARED_POINTS: usize = 8;
@@ -720,6 +738,82 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         verifier.score_dirs(sensor, beams)
     }
 
+    /// [`Localizer::verify_pose`] for a scan with a skew (rad, see
+    /// [`refine::refine_skew`]): beam `k` of `n` points along its direction
+    /// turned by `skew * refine::sweep_fraction(k, n)`.
+    pub fn verify_pose_skewed(&self, sensor: &Pose2, skew: f32) -> verify::Vicinity {
+        let verifier = verify::Verifier::new(self.db, &self.grid, self.scan.range_max);
+        let n = self.scan.beams;
+        let beams = self.b.in_pts[..n]
+            .iter()
+            .zip(&self.b.in_rng[..n])
+            .enumerate()
+            .map(|(k, (p, &r))| {
+                let phi = skew * refine::sweep_fraction(k, n);
+                let (s, c) = (libm::sinf(phi), libm::cosf(phi));
+                let u = [p[0] / r, p[1] / r];
+                ([c * u[0] - s * u[1], s * u[0] + c * u[1]], r)
+            });
+        verifier.score_dirs(sensor, beams)
+    }
+
+    /// Refits the answer, candidate `best`, for a scanner that turned while
+    /// it scanned ([`refine::skew_fit`]). The skewed fit is taken only when
+    /// the turn explains most of what the rigid fit leaves (its robust cost
+    /// at most [`SKEW_COST_RATIO`] of the rigid one) and it has more
+    /// evidence; then the candidate becomes that pose (its vicinity,
+    /// evidence and spread at the skew), the scan's points are de-skewed in
+    /// place for what follows (the covariance), and the skew is returned.
+    /// Otherwise nothing changes and it is 0.
+    fn fit_skew(&mut self, best: usize) -> f32 {
+        let p = self.params;
+        let Some(&c) = self.b.cands.get(best) else {
+            return 0.0;
+        };
+        if p.refine.refine_iters == 0 || c.has_pose == 0 {
+            return 0.0;
+        }
+        let n = self.scan.beams;
+        let sensor = Pose2::new(c.x, c.y, c.theta).compose(&p.sensor.offset);
+        let (fitted, skew, rigid_cost, cost) = refine::skew_fit(
+            &self.dm,
+            &self.b.in_pts[..n],
+            sensor,
+            p.refine.refine_iters,
+            p.refine.refine_max_dist,
+        );
+        if skew == 0.0 || !(cost <= SKEW_COST_RATIO * rigid_cost) {
+            return 0.0;
+        }
+        let robot = fitted.compose(&p.sensor.offset.inverse());
+        if self.prior.is_some_and(|pr| !pr.allows(&robot)) {
+            return 0.0;
+        }
+        let v = self.verify_pose_skewed(&fitted, skew);
+        let evidence = v.evidence(p.verify.short_weight, p.verify.occlusion_fit);
+        if !(evidence > c.evidence) {
+            return 0.0;
+        }
+        refine::deskew(&mut self.b.in_pts[..n], skew);
+        let spread = self.spread_at(&fitted);
+        self.b.cands[best] = Candidate {
+            x: robot.x,
+            y: robot.y,
+            theta: robot.theta,
+            vicinity: v.score,
+            vicinity_threshold: v.threshold,
+            short_beams: v.short,
+            long_beams: v.long,
+            pairs: v.pairs,
+            through_beams: v.through,
+            free_space_ok: v.free_space_ok(p.verify.through_max) as u32,
+            evidence,
+            spread,
+            ..c
+        };
+        skew
+    }
+
     /// The confidence's spread feature ([`Candidate::spread`]) of a sensor
     /// pose.
     pub fn spread_at(&self, sensor: &Pose2) -> f32 {
@@ -788,16 +882,27 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// best one `search` found, its ambiguity and acceptance
     /// ([`crate::select`]).
     pub fn select(
-        self,
+        mut self,
         search: &Search,
         examined: usize,
     ) -> Result<Localization<'s>, LocalizeError> {
         let nc = examined.min(self.nc);
-        let cands: &'s [Candidate] = &self.b.cands[..nc];
         let best = search
             .best()
             .filter(|&b| b < nc)
             .ok_or(LocalizeError::NoMatch { candidates: nc })?;
+        // The skew is fitted for the answer alone, so an answer another
+        // (rigid) pose makes ambiguous stays as it is.
+        let skew = if select::ambiguous(
+            &self.b.cands[..nc],
+            &self.b.cands[best],
+            self.params.select.ambiguity_ratio,
+        ) {
+            0.0
+        } else {
+            self.fit_skew(best)
+        };
+        let cands: &'s [Candidate] = &self.b.cands[..nc];
         let c = cands[best];
         let pose = Pose2::new(c.x, c.y, c.theta);
         let p = self.params;
@@ -832,6 +937,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         Ok(Localization {
             pose,
             sensor_pose,
+            skew,
             site: c.site,
             coarse_rank: c.rank,
             gamma: c.gamma,

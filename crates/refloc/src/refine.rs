@@ -316,6 +316,187 @@ pub fn refine(
     (pose, used)
 }
 
+/// Largest heading change (rad) over one sweep of the scanner that
+/// [`refine_skew`] fits: 1.5 rad/s over a 0.1 s sweep (a 10 Hz spinning
+/// lidar on a robot turning fast), beyond what a robot turns while it
+/// localizes.
+pub const SKEW_MAX: f32 = 0.15;
+
+/// The time of beam `k` of `n` (counter-clockwise order) within the sweep,
+/// as a fraction from -0.5 (first) to 0.5 (last), 0 with a single beam.
+#[inline]
+pub fn sweep_fraction(k: usize, n: usize) -> f32 {
+    if n < 2 {
+        0.0
+    } else {
+        k as f32 / (n - 1) as f32 - 0.5
+    }
+}
+
+/// [`refine`] with a fourth unknown, the scan's *skew* (rad): the heading
+/// change over the sweep of a scanner that turns while it scans, so that
+/// point `k` of `n` is rotated by `skew * sweep_fraction(k, n)` about the
+/// sensor before the pose applies (`pose` is the sensor pose at the middle
+/// of the sweep). The rotation is taken to second order (below 0.1 mm at
+/// 10 m for [`SKEW_MAX`]). Starts at `pose` with no skew; the skew stays
+/// within +-[`SKEW_MAX`]. Returns the refined pose and skew.
+pub fn refine_skew(
+    dm: &DistMap<'_>,
+    pts: &[[f32; 2]],
+    pose: Pose2,
+    iters: u32,
+    max_dist: f32,
+) -> (Pose2, f32) {
+    let (mut pose, mut skew) = (pose, 0.0f32);
+    let (mut current, mut h, mut g, mut used) = skew_pass(dm, pts, &pose, skew, max_dist);
+    for _ in 0..iters {
+        if used < 4 {
+            break;
+        }
+        for (a, row) in h.iter_mut().enumerate() {
+            row[a] += 1e-3 * (1.0 + row[a]);
+        }
+        let Some(step) = solve4(&h, &g) else { break };
+        let m = libm::fabsf(step[0])
+            .max(libm::fabsf(step[1]))
+            .max(libm::fabsf(step[2]) * 2.0)
+            .max(libm::fabsf(step[3]) * 2.0);
+        let mut scale = if m > 0.1 { 0.1 / m } else { 1.0 };
+        let mut moved = false;
+        for _ in 0..5 {
+            let cand = Pose2::new(
+                pose.x - scale * step[0],
+                pose.y - scale * step[1],
+                pose.theta - scale * step[2],
+            );
+            let k = (skew - scale * step[3]).clamp(-SKEW_MAX, SKEW_MAX);
+            let next = skew_pass(dm, pts, &cand, k, max_dist);
+            if next.0 < current {
+                (pose, skew) = (cand, k);
+                (current, h, g, used) = next;
+                moved = true;
+                break;
+            }
+            scale *= 0.5;
+        }
+        if !moved || scale * step.iter().map(|v| libm::fabsf(*v)).sum::<f32>() < 1e-5 {
+            break;
+        }
+    }
+    (pose, skew)
+}
+
+/// The robust cost ([`refine`]'s) of the points at `pose` with no skew,
+/// then [`refine_skew`] from there and the cost at its result: (skewed
+/// pose, skew (rad), rigid cost, skewed cost). The ratio of the two costs
+/// says how much of what the rigid fit leaves the scanner's turn explains.
+pub fn skew_fit(
+    dm: &DistMap<'_>,
+    pts: &[[f32; 2]],
+    pose: Pose2,
+    iters: u32,
+    max_dist: f32,
+) -> (Pose2, f32, f32, f32) {
+    let rigid = skew_pass(dm, pts, &pose, 0.0, max_dist).0;
+    let (fitted, skew) = refine_skew(dm, pts, pose, iters, max_dist);
+    let cost = skew_pass(dm, pts, &fitted, skew, max_dist).0;
+    (fitted, skew, rigid, cost)
+}
+
+/// Rotates point `k` of `pts` by `skew * sweep_fraction(k, n)` (exactly),
+/// in place: the scan as a scanner that did not turn would have seen it.
+pub fn deskew(pts: &mut [[f32; 2]], skew: f32) {
+    let n = pts.len();
+    for (k, p) in pts.iter_mut().enumerate() {
+        let phi = skew * sweep_fraction(k, n);
+        let (s, c) = (libm::sinf(phi), libm::cosf(phi));
+        *p = [c * p[0] - s * p[1], s * p[0] + c * p[1]];
+    }
+}
+
+/// The robust cost, the 4x4 normal equations (x, y, theta, skew) and the
+/// points that carried weight, at `pose` and `skew` (see [`refine_skew`]).
+fn skew_pass(
+    dm: &DistMap<'_>,
+    pts: &[[f32; 2]],
+    pose: &Pose2,
+    skew: f32,
+    max_dist: f32,
+) -> (f32, [[f32; 4]; 4], [f32; 4], u32) {
+    let (s, c) = (libm::sinf(pose.theta), libm::cosf(pose.theta));
+    let c2 = ROBUST_SCALE * ROBUST_SCALE;
+    let n = pts.len();
+    let (mut total, mut h, mut g, mut used) = (0.0f32, [[0.0f32; 4]; 4], [0.0f32; 4], 0u32);
+    for (k, p) in pts.iter().enumerate() {
+        if !p[0].is_finite() {
+            continue;
+        }
+        let f = sweep_fraction(k, n);
+        let phi = skew * f;
+        let (cp, sp) = (1.0 - 0.5 * phi * phi, phi);
+        let q = [cp * p[0] - sp * p[1], sp * p[0] + cp * p[1]];
+        let m = [pose.x + c * q[0] - s * q[1], pose.y + s * q[0] + c * q[1]];
+        let sample = dm.sample(m);
+        let d = match sample {
+            Some((d, _)) if d < max_dist => d,
+            _ => max_dist,
+        };
+        total += 0.5 * c2 * libm::logf(1.0 + d * d / c2);
+        let Some((d, grad)) = sample else {
+            continue;
+        };
+        if !(d < max_dist) {
+            continue;
+        }
+        let wgt = 1.0 / (1.0 + d * d / c2);
+        let dth = grad[0] * (-s * q[0] - c * q[1]) + grad[1] * (c * q[0] - s * q[1]);
+        let j = [grad[0], grad[1], dth, f * dth];
+        for a in 0..4 {
+            g[a] += wgt * j[a] * d;
+            for b in 0..4 {
+                h[a][b] += wgt * j[a] * j[b];
+            }
+        }
+        used += 1;
+    }
+    (total, h, g, used)
+}
+
+/// Solves the 4x4 system `h x = g` (Gaussian elimination with partial
+/// pivoting); `None` when singular.
+fn solve4(h: &[[f32; 4]; 4], g: &[f32; 4]) -> Option<[f32; 4]> {
+    let mut m = [[0.0f32; 5]; 4];
+    for r in 0..4 {
+        m[r][..4].copy_from_slice(&h[r]);
+        m[r][4] = g[r];
+    }
+    for col in 0..4 {
+        let piv =
+            (col..4).max_by(|&a, &b| libm::fabsf(m[a][col]).total_cmp(&libm::fabsf(m[b][col])))?;
+        if !(libm::fabsf(m[piv][col]) > 1e-12) {
+            return None;
+        }
+        m.swap(col, piv);
+        let pivot = m[col];
+        for row in m.iter_mut().skip(col + 1) {
+            let f = row[col] / pivot[col];
+            for (v, p) in row.iter_mut().zip(&pivot).skip(col) {
+                *v -= f * p;
+            }
+        }
+    }
+    let mut x = [0.0f32; 4];
+    for r in (0..4).rev() {
+        let known: f32 = m[r][r + 1..4]
+            .iter()
+            .zip(&x[r + 1..])
+            .map(|(a, b)| a * b)
+            .sum();
+        x[r] = (m[r][4] - known) / m[r][r];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
 /// Covariance (row-major 3x3, x and y in m, theta in rad) of a sensor pose
 /// fitted to the points `pts` by [`refine`]: `s^2 (J^T W J)^-1` at `pose`,
 /// with the Cauchy weights `W` of the fit, and `s^2` the weighted mean
@@ -483,6 +664,112 @@ mod tests {
         let side: Vec<[f32; 2]> = pts.iter().copied().filter(|p| p[1].abs() > 1.4).collect();
         let c = position_spread(&dm(&corridor, frame), &side, &centre, 0.3, 0.0144);
         assert!(c.is_none_or(|c| c > 10.0 * r), "{c:?} vs {r}");
+    }
+
+    /// An 80 x 80 grid at 0.05 m with walls five cells thick all round:
+    /// a room of 3.5 m whose inner faces are 1.75 m from the centre
+    /// (2.0, 2.0), encoded as the compiler does (the distance between cell
+    /// centres less half a cell).
+    fn thick_room() -> Vec<u8> {
+        let (n, t) = (80i32, 5i32);
+        let mut out = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                let inside = [x - (t - 1), (n - t) - x, y - (t - 1), (n - t) - y];
+                let d = *inside.iter().min().unwrap();
+                out.push(dist_encode(d as f32 - 0.5));
+            }
+        }
+        out
+    }
+
+    /// A scan from the centre of [`thick_room`], beam `k` of `n` at angle
+    /// `-pi + 2 pi k / n`, taken by a scanner that turned by `skew` (rad)
+    /// over its sweep: beam `k` really pointed `skew * sweep_fraction(k, n)`
+    /// further, and its range is recorded at the nominal angle.
+    fn room_scan(n: usize, skew: f32) -> Vec<[f32; 2]> {
+        (0..n)
+            .map(|k| {
+                let a = -core::f32::consts::PI + core::f32::consts::TAU * k as f32 / n as f32;
+                let real = a + skew * super::sweep_fraction(k, n);
+                let r = 1.75 / libm::fabsf(libm::cosf(real)).max(libm::fabsf(libm::sinf(real)));
+                [r * libm::cosf(a), r * libm::sinf(a)]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_skew_of_a_turning_scanner_is_fitted_and_a_still_one_has_none() {
+        let frame = MapFrame {
+            resolution: 0.05,
+            origin: Pose2::new(0.0, 0.0, 0.0),
+        };
+        let room = thick_room();
+        let dm = DistMap::new(80, 80, &room, frame);
+        let centre = Pose2::new(2.0, 2.0, 0.0);
+        let start = Pose2::new(2.03, 1.98, 0.02);
+        let cost = |q: &[[f32; 2]], at: &Pose2| super::cost_and_normal_equations(&dm, q, at, 0.3).0;
+        for skew in [0.0f32, 0.06, -0.1] {
+            let pts = room_scan(360, skew);
+            let (pose, fitted) = super::refine_skew(&dm, &pts, start, 20, 0.3);
+            assert!((fitted - skew).abs() < 0.01, "skew {skew}: fitted {fitted}");
+            let err = (pose.x - centre.x).hypot(pose.y - centre.y);
+            assert!(err < 0.01, "skew {skew}: {pose:?}");
+            assert!(
+                (pose.theta - centre.theta).abs() < 0.01,
+                "skew {skew}: {pose:?}"
+            );
+            // The rigid refinement cannot take the turn out of the scan.
+            if skew != 0.0 {
+                let (rigid, _) = super::refine(&dm, &pts, start, 20, 0.3);
+                let mut fixed = pts.clone();
+                super::deskew(&mut fixed, fitted);
+                assert!(
+                    cost(&fixed, &pose) < 0.5 * cost(&pts, &rigid),
+                    "skew {skew}"
+                );
+            }
+        }
+        // The fitted skew stays within its bound.
+        let (_, far) = super::refine_skew(&dm, &room_scan(360, 0.4), start, 30, 0.3);
+        assert!(far.abs() <= super::SKEW_MAX, "{far}");
+    }
+
+    #[test]
+    fn solve4_solves_and_refuses_singular_systems() {
+        let h = [
+            [4.0, 1.0, 0.5, 0.2],
+            [1.0, 3.0, 0.3, 0.1],
+            [0.5, 0.3, 2.0, 0.4],
+            [0.2, 0.1, 0.4, 1.0],
+        ];
+        let want = [1.0f32, -2.0, 0.5, 3.0];
+        let g: Vec<f32> = h
+            .iter()
+            .map(|r| r.iter().zip(&want).map(|(a, b)| a * b).sum())
+            .collect();
+        let x = super::solve4(&h, &[g[0], g[1], g[2], g[3]]).unwrap();
+        for (a, b) in x.iter().zip(&want) {
+            assert!((a - b).abs() < 1e-5, "{x:?}");
+        }
+        // A zero first column needs the pivot from another row.
+        let p = [
+            [0.0, 1.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ];
+        assert_eq!(
+            super::solve4(&p, &[2.0, 3.0, 4.0, 5.0]),
+            Some([3.0, 2.0, 4.0, 5.0])
+        );
+        let singular = [
+            [1.0, 2.0, 0.0, 0.0],
+            [2.0, 4.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ];
+        assert_eq!(super::solve4(&singular, &[1.0; 4]), None);
     }
 
     #[test]

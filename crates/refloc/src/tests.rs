@@ -1403,6 +1403,48 @@ fn a_polygon_prior_keeps_the_answer_inside_it_and_excludes_it_elsewhere() {
     assert_eq!(run(Some(both)).unwrap_err(), LocalizeError::BadPrior);
 }
 
+/// A scan taken while turning: the answer is refitted with the turn (its
+/// skew) and lands on the pose at the middle of the sweep; a still scan
+/// keeps a rigid fit.
+#[test]
+fn a_scan_taken_while_turning_is_fitted_with_its_skew() {
+    let buf = tiny_db();
+    let db = RefDb::new(buf.bytes()).unwrap();
+    let (truth, still) = truth_and_scan();
+    let n = still.len();
+    let skew = 0.1f32;
+    let words = fixture::grid_words();
+    let grid = crate::raycast::BitGrid::new(fixture::W, fixture::H, &words).unwrap();
+    let f = fixture::frame();
+    let uv = f.to_cells([truth.x, truth.y]);
+    let inc = 2.0 * PI / n as f32;
+    let turning: Vec<f32> = (0..n)
+        .map(|k| {
+            let a = truth.theta - PI + k as f32 * inc + skew * crate::refine::sweep_fraction(k, n);
+            crate::raycast::cast(
+                &grid,
+                uv[0],
+                uv[1],
+                f.angle_to_cells(a),
+                fixture::RANGE_MAX / f.resolution,
+            )
+            .map_or(f32::INFINITY, |t| t * f.resolution)
+        })
+        .collect();
+    let mut scratch = vec![0u8; scratch_size(db.params(), n)];
+    let l = localize(&db, &ranges_scan(&turning), &mut scratch).unwrap();
+    assert!((l.skew - skew).abs() < 0.02, "skew {}", l.skew);
+    let err = (l.pose.x - truth.x).hypot(l.pose.y - truth.y);
+    assert!(
+        err < 0.05 && angle_diff(l.pose.theta, truth.theta) < 0.02,
+        "{:?}",
+        l.pose
+    );
+    assert!(l.accepted, "confidence {}", l.confidence);
+    let l = localize(&db, &ranges_scan(&still), &mut scratch).unwrap();
+    assert_eq!(l.skew, 0.0);
+}
+
 #[test]
 fn only_a_pose_that_explains_part_of_the_scan_is_refined() {
     let buf = tiny_db();

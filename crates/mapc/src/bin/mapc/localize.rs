@@ -797,7 +797,7 @@ impl Found<'_, '_> {
             "valid_points": l.valid_points, "short_beams": l.short_beams, "long_beams": l.long_beams, "through_beams": l.through_beams,
             "evidence": l.evidence, "free_space_ok": l.free_space_ok,
             "ambiguous": l.ambiguous, "time_us": self.time_us,
-            "confidence": l.confidence,
+            "confidence": l.confidence, "skew": l.skew,
             "covariance": l.covariance,
             "hypotheses": l.hypotheses().iter()
                 .map(|h| json!({"x": h.pose.x, "y": h.pose.y, "theta": h.pose.theta, "confidence": h.confidence}))
