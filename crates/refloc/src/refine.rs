@@ -168,12 +168,13 @@ const ROBUST_SCALE: f32 = 0.05;
 
 /// The robust (Cauchy-weighted) Gauss-Newton normal equations of the
 /// points' distances to the map's surfaces at `pose`.
+/// `N` is 3 (x, y, theta) or 4 (and the skew, [`refine_skew`]).
 #[derive(Clone, Copy)]
-struct NormalEquations {
+struct NormalEquations<const N: usize = 3> {
     /// `J^T W J`.
-    h: [[f32; 3]; 3],
+    h: [[f32; N]; N],
     /// `J^T W d`.
-    g: [f32; 3],
+    g: [f32; N],
     /// Sum of the weights.
     wsum: f32,
     /// Weighted sum of the squared distances (m^2).
@@ -188,7 +189,7 @@ fn normal_equations(
     pose: &Pose2,
     max_dist: f32,
 ) -> NormalEquations {
-    points_pass::<false>(dm, pts, pose, max_dist).1
+    points_pass::<false, 3>(dm, pts, pose, 0.0, max_dist).1
 }
 
 /// The robust cost of `pose`, the sum over points of `c^2/2 * ln(1 +
@@ -201,32 +202,45 @@ fn cost_and_normal_equations(
     pose: &Pose2,
     max_dist: f32,
 ) -> (f32, NormalEquations) {
-    points_pass::<true>(dm, pts, pose, max_dist)
+    points_pass::<true, 3>(dm, pts, pose, 0.0, max_dist)
 }
 
-/// The one pass over the points behind [`normal_equations`] and
-/// [`cost_and_normal_equations`]; the robust cost (a logarithm per point)
-/// only when `COST`, else 0.
-fn points_pass<const COST: bool>(
+/// The one pass over the points behind [`normal_equations`],
+/// [`cost_and_normal_equations`] and [`refine_skew`]; the robust cost (a
+/// logarithm per point) only when `COST`, else 0. With `N` = 4 point `k`
+/// of `n` is first turned by `skew * sweep_fraction(k, n)` (to second
+/// order) and the fourth unknown is the skew; with `N` = 3 `skew` is
+/// ignored.
+fn points_pass<const COST: bool, const N: usize>(
     dm: &DistMap<'_>,
     pts: &[[f32; 2]],
     pose: &Pose2,
+    skew: f32,
     max_dist: f32,
-) -> (f32, NormalEquations) {
+) -> (f32, NormalEquations<N>) {
     let (s, c) = (libm::sinf(pose.theta), libm::cosf(pose.theta));
     let c2 = ROBUST_SCALE * ROBUST_SCALE;
+    let n = pts.len();
     let mut total = 0.0f32;
     let mut ne = NormalEquations {
-        h: [[0.0; 3]; 3],
-        g: [0.0; 3],
+        h: [[0.0; N]; N],
+        g: [0.0; N],
         wsum: 0.0,
         wd2: 0.0,
         n: 0,
     };
-    for p in pts {
+    for (k, p) in pts.iter().enumerate() {
         if !p[0].is_finite() {
             continue;
         }
+        let (p, f) = if N == 4 {
+            let f = sweep_fraction(k, n);
+            let phi = skew * f;
+            let (cp, sp) = (1.0 - 0.5 * phi * phi, phi);
+            ([cp * p[0] - sp * p[1], sp * p[0] + cp * p[1]], f)
+        } else {
+            (*p, 0.0)
+        };
         let m = [pose.x + c * p[0] - s * p[1], pose.y + s * p[0] + c * p[1]];
         let sample = dm.sample(m);
         if COST {
@@ -244,10 +258,14 @@ fn points_pass<const COST: bool>(
         }
         let wgt = 1.0 / (1.0 + d * d / c2);
         let dth = grad[0] * (-s * p[0] - c * p[1]) + grad[1] * (c * p[0] - s * p[1]);
-        let j = [grad[0], grad[1], dth];
-        for a in 0..3 {
+        let mut j = [0.0f32; N];
+        j[..3].copy_from_slice(&[grad[0], grad[1], dth]);
+        if let Some(js) = j.get_mut(3) {
+            *js = f * dth;
+        }
+        for a in 0..N {
             ne.g[a] += wgt * j[a] * d;
-            for b in 0..3 {
+            for b in 0..N {
                 ne.h[a][b] += wgt * j[a] * j[b];
             }
         }
@@ -256,6 +274,67 @@ fn points_pass<const COST: bool>(
         ne.n += 1;
     }
     (total, ne)
+}
+
+/// Solves `h x = g` for `N` unknowns; `None` when singular.
+type Solver<const N: usize> = fn(&[[f32; N]; N], &[f32; N]) -> Option<[f32; N]>;
+
+/// The Gauss-Newton loop of [`refine`] and [`refine_skew`] over `N`
+/// unknowns: from `start`, `pass` gives the robust cost and the normal
+/// equations of a state; each iteration (while at least `min_used` points
+/// carry weight) solves the damped system, bounds the step (0.1 in x and
+/// y, 0.05 in the others) and halves it up to four times until the cost
+/// falls; it stops when no step lowers the cost or the step is below
+/// 1e-5. `moved(state, step, scale)` is `state - scale * step`. Returns
+/// the state and the points that carried weight at the last iteration's
+/// start.
+fn gauss_newton<S: Copy, const N: usize>(
+    start: S,
+    iters: u32,
+    min_used: u32,
+    solve: Solver<N>,
+    moved: impl Fn(&S, &[f32; N], f32) -> S,
+    pass: impl Fn(&S) -> (f32, NormalEquations<N>),
+) -> (S, u32) {
+    let mut state = start;
+    let mut used = 0;
+    let (mut current, mut ne) = pass(&state);
+    for _ in 0..iters {
+        let (mut h, g) = (ne.h, ne.g);
+        used = ne.n;
+        if used < min_used {
+            break;
+        }
+        // Levenberg damping keeps the step sane on degenerate geometry (a corridor).
+        for (a, row) in h.iter_mut().enumerate() {
+            row[a] += 1e-3 * (1.0 + row[a]);
+        }
+        let Some(step) = solve(&h, &g) else { break };
+        // Bound each step: refinement corrects small errors, it does not search.
+        let m = step
+            .iter()
+            .enumerate()
+            .map(|(a, v)| libm::fabsf(*v) * if a < 2 { 1.0 } else { 2.0 })
+            .fold(0.0f32, f32::max);
+        let mut scale = if m > 0.1 { 0.1 / m } else { 1.0 };
+        let mut accepted = false;
+        for _ in 0..5 {
+            let cand = moved(&state, &step, scale);
+            let (next, next_ne) = pass(&cand);
+            if next < current {
+                state = cand;
+                current = next;
+                ne = next_ne;
+                accepted = true;
+                break;
+            }
+            scale *= 0.5;
+        }
+        if !accepted || scale * step.iter().map(|v| libm::fabsf(*v)).sum::<f32>() < 1e-5 {
+            break;
+        }
+    }
+    (state, used)
 }
 
 /// Refines the sensor pose `pose` (map frame) so the sensor-frame points
@@ -271,49 +350,24 @@ pub fn refine(
     iters: u32,
     max_dist: f32,
 ) -> (Pose2, u32) {
-    let mut pose = pose;
-    let mut used = 0;
-    let (mut current, mut ne) = cost_and_normal_equations(dm, pts, &pose, max_dist);
-    for _ in 0..iters {
-        let (mut h, g) = (ne.h, ne.g);
-        used = ne.n;
-        if used < 3 {
-            break;
-        }
-        // Levenberg damping keeps the step sane on degenerate geometry (a corridor).
-        for (a, row) in h.iter_mut().enumerate() {
-            row[a] += 1e-3 * (1.0 + row[a]);
-        }
-        let Some(step) = solve3(&h, &g) else { break };
-        // Bound each step: refinement corrects small errors, it does not search.
-        let m = libm::fabsf(step[0])
-            .max(libm::fabsf(step[1]))
-            .max(libm::fabsf(step[2]) * 2.0);
-        let mut scale = if m > 0.1 { 0.1 / m } else { 1.0 };
-        let mut moved = false;
-        for _ in 0..5 {
-            let cand = Pose2::new(
-                pose.x - scale * step[0],
-                pose.y - scale * step[1],
-                pose.theta - scale * step[2],
-            );
-            let (next, next_ne) = cost_and_normal_equations(dm, pts, &cand, max_dist);
-            if next < current {
-                pose = cand;
-                current = next;
-                ne = next_ne;
-                moved = true;
-                break;
-            }
-            scale *= 0.5;
-        }
-        if !moved
-            || scale * (libm::fabsf(step[0]) + libm::fabsf(step[1]) + libm::fabsf(step[2])) < 1e-5
-        {
-            break;
-        }
-    }
-    (pose, used)
+    gauss_newton(
+        pose,
+        iters,
+        3,
+        solve3,
+        |p, step, scale| stepped(p, step, scale),
+        |p| cost_and_normal_equations(dm, pts, p, max_dist),
+    )
+}
+
+/// `pose` less `scale` times the first three entries of `step` (x, y,
+/// theta): a Gauss-Newton step of [`refine`] and [`refine_skew`].
+fn stepped(pose: &Pose2, step: &[f32], scale: f32) -> Pose2 {
+    Pose2::new(
+        pose.x - scale * step[0],
+        pose.y - scale * step[1],
+        pose.theta - scale * step[2],
+    )
 }
 
 /// Largest heading change (rad) over one sweep of the scanner that
@@ -347,43 +401,20 @@ pub fn refine_skew(
     iters: u32,
     max_dist: f32,
 ) -> (Pose2, f32) {
-    let (mut pose, mut skew) = (pose, 0.0f32);
-    let (mut current, mut h, mut g, mut used) = skew_pass(dm, pts, &pose, skew, max_dist);
-    for _ in 0..iters {
-        if used < 4 {
-            break;
-        }
-        for (a, row) in h.iter_mut().enumerate() {
-            row[a] += 1e-3 * (1.0 + row[a]);
-        }
-        let Some(step) = solve4(&h, &g) else { break };
-        let m = libm::fabsf(step[0])
-            .max(libm::fabsf(step[1]))
-            .max(libm::fabsf(step[2]) * 2.0)
-            .max(libm::fabsf(step[3]) * 2.0);
-        let mut scale = if m > 0.1 { 0.1 / m } else { 1.0 };
-        let mut moved = false;
-        for _ in 0..5 {
-            let cand = Pose2::new(
-                pose.x - scale * step[0],
-                pose.y - scale * step[1],
-                pose.theta - scale * step[2],
-            );
-            let k = (skew - scale * step[3]).clamp(-SKEW_MAX, SKEW_MAX);
-            let next = skew_pass(dm, pts, &cand, k, max_dist);
-            if next.0 < current {
-                (pose, skew) = (cand, k);
-                (current, h, g, used) = next;
-                moved = true;
-                break;
-            }
-            scale *= 0.5;
-        }
-        if !moved || scale * step.iter().map(|v| libm::fabsf(*v)).sum::<f32>() < 1e-5 {
-            break;
-        }
-    }
-    (pose, skew)
+    gauss_newton(
+        (pose, 0.0f32),
+        iters,
+        4,
+        solve4,
+        |(p, skew), step, scale| {
+            (
+                stepped(p, step, scale),
+                (skew - scale * step[3]).clamp(-SKEW_MAX, SKEW_MAX),
+            )
+        },
+        |(p, skew)| points_pass::<true, 4>(dm, pts, p, *skew, max_dist),
+    )
+    .0
 }
 
 /// The robust cost ([`refine`]'s) of the points at `pose` with no skew,
@@ -397,9 +428,9 @@ pub fn skew_fit(
     iters: u32,
     max_dist: f32,
 ) -> (Pose2, f32, f32, f32) {
-    let rigid = skew_pass(dm, pts, &pose, 0.0, max_dist).0;
+    let rigid = points_pass::<true, 4>(dm, pts, &pose, 0.0, max_dist).0;
     let (fitted, skew) = refine_skew(dm, pts, pose, iters, max_dist);
-    let cost = skew_pass(dm, pts, &fitted, skew, max_dist).0;
+    let cost = points_pass::<true, 4>(dm, pts, &fitted, skew, max_dist).0;
     (fitted, skew, rigid, cost)
 }
 
@@ -412,54 +443,6 @@ pub fn deskew(pts: &mut [[f32; 2]], skew: f32) {
         let (s, c) = (libm::sinf(phi), libm::cosf(phi));
         *p = [c * p[0] - s * p[1], s * p[0] + c * p[1]];
     }
-}
-
-/// The robust cost, the 4x4 normal equations (x, y, theta, skew) and the
-/// points that carried weight, at `pose` and `skew` (see [`refine_skew`]).
-fn skew_pass(
-    dm: &DistMap<'_>,
-    pts: &[[f32; 2]],
-    pose: &Pose2,
-    skew: f32,
-    max_dist: f32,
-) -> (f32, [[f32; 4]; 4], [f32; 4], u32) {
-    let (s, c) = (libm::sinf(pose.theta), libm::cosf(pose.theta));
-    let c2 = ROBUST_SCALE * ROBUST_SCALE;
-    let n = pts.len();
-    let (mut total, mut h, mut g, mut used) = (0.0f32, [[0.0f32; 4]; 4], [0.0f32; 4], 0u32);
-    for (k, p) in pts.iter().enumerate() {
-        if !p[0].is_finite() {
-            continue;
-        }
-        let f = sweep_fraction(k, n);
-        let phi = skew * f;
-        let (cp, sp) = (1.0 - 0.5 * phi * phi, phi);
-        let q = [cp * p[0] - sp * p[1], sp * p[0] + cp * p[1]];
-        let m = [pose.x + c * q[0] - s * q[1], pose.y + s * q[0] + c * q[1]];
-        let sample = dm.sample(m);
-        let d = match sample {
-            Some((d, _)) if d < max_dist => d,
-            _ => max_dist,
-        };
-        total += 0.5 * c2 * libm::logf(1.0 + d * d / c2);
-        let Some((d, grad)) = sample else {
-            continue;
-        };
-        if !(d < max_dist) {
-            continue;
-        }
-        let wgt = 1.0 / (1.0 + d * d / c2);
-        let dth = grad[0] * (-s * q[0] - c * q[1]) + grad[1] * (c * q[0] - s * q[1]);
-        let j = [grad[0], grad[1], dth, f * dth];
-        for a in 0..4 {
-            g[a] += wgt * j[a] * d;
-            for b in 0..4 {
-                h[a][b] += wgt * j[a] * j[b];
-            }
-        }
-        used += 1;
-    }
-    (total, h, g, used)
 }
 
 /// Solves the 4x4 system `h x = g` (Gaussian elimination with partial
