@@ -727,15 +727,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
 
     /// The vicinity score of a sensor pose (map frame) for the prepared scan.
     pub fn verify_pose(&self, sensor: &Pose2) -> verify::Vicinity {
-        let verifier = verify::Verifier::new(self.db, &self.grid, self.scan.range_max);
-        let n = self.scan.beams;
-        // A beam with a return points along its point (`in_pts` is the
-        // range times the unit direction); the others are skipped.
-        let beams = self.b.in_pts[..n]
-            .iter()
-            .zip(&self.b.in_rng[..n])
-            .map(|(p, &r)| ([p[0] / r, p[1] / r], r));
-        verifier.score_dirs(sensor, beams)
+        self.verify_pose_skewed(sensor, 0.0)
     }
 
     /// [`Localizer::verify_pose`] for a scan with a skew (rad, see
@@ -744,14 +736,19 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     pub fn verify_pose_skewed(&self, sensor: &Pose2, skew: f32) -> verify::Vicinity {
         let verifier = verify::Verifier::new(self.db, &self.grid, self.scan.range_max);
         let n = self.scan.beams;
+        // A beam with a return points along its point (`in_pts` is the
+        // range times the unit direction); the others are skipped.
         let beams = self.b.in_pts[..n]
             .iter()
             .zip(&self.b.in_rng[..n])
             .enumerate()
             .map(|(k, (p, &r))| {
+                let u = [p[0] / r, p[1] / r];
+                if skew == 0.0 {
+                    return (u, r);
+                }
                 let phi = skew * refine::sweep_fraction(k, n);
                 let (s, c) = (libm::sinf(phi), libm::cosf(phi));
-                let u = [p[0] / r, p[1] / r];
                 ([c * u[0] - s * u[1], s * u[0] + c * u[1]], r)
             });
         verifier.score_dirs(sensor, beams)
