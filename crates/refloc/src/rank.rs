@@ -14,20 +14,45 @@ pub fn correlation(h: &[f32], g: &[f32]) -> f32 {
     if k == 0 {
         return 0.0;
     }
-    let (mut sh, mut sg) = (0.0f32, 0.0f32);
-    for i in 0..k {
-        sh += h[i];
-        sg += g[i];
+    let (h, g) = (&h[..k], &g[..k]);
+    // Sums in LANES independent accumulators (then added pairwise), which
+    // the compiler turns into vector arithmetic: a single running sum is a
+    // chain of dependent additions, one bin at a time. It was most of the
+    // coarse stage (docs/performance.md, "Vector sums in the coarse
+    // correlation"); the order of the additions changes only rounding.
+    let (hc, ht) = lanes(h);
+    let (gc, gt) = lanes(g);
+    let (mut sh, mut sg) = ([0.0f32; LANES], [0.0f32; LANES]);
+    for (a, b) in hc.clone().zip(gc.clone()) {
+        for l in 0..LANES {
+            sh[l] += a[l];
+            sg[l] += b[l];
+        }
     }
+    for (l, (a, b)) in ht.iter().zip(gt).enumerate() {
+        sh[l] += a;
+        sg[l] += b;
+    }
+    let (sh, sg) = (lane_sum(&sh), lane_sum(&sg));
     let mean = (sh + sg) / (2 * k) as f32;
-    let (mut num, mut dh, mut dg) = (0.0f32, 0.0f32, 0.0f32);
-    for i in 0..k {
-        let a = h[i] - mean;
-        let b = g[i] - mean;
-        num += a * b;
-        dh += a * a;
-        dg += b * b;
+    let (mut num, mut dh, mut dg) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+    for (x, y) in hc.zip(gc) {
+        for l in 0..LANES {
+            let a = x[l] - mean;
+            let b = y[l] - mean;
+            num[l] += a * b;
+            dh[l] += a * a;
+            dg[l] += b * b;
+        }
     }
+    for (l, (x, y)) in ht.iter().zip(gt).enumerate() {
+        let a = x - mean;
+        let b = y - mean;
+        num[l] += a * b;
+        dh[l] += a * a;
+        dg[l] += b * b;
+    }
+    let (num, dh, dg) = (lane_sum(&num), lane_sum(&dh), lane_sum(&dg));
     // A flat histogram has zero variance; rounding leaves a tiny residue that
     // must not be read as signal.
     let eps = 1e-9 * (sh * sh + sg * sg) / k as f32 + f32::MIN_POSITIVE;
@@ -41,6 +66,23 @@ pub fn correlation(h: &[f32], g: &[f32]) -> f32 {
     } else {
         0.0
     }
+}
+
+/// Accumulators of [`correlation`]'s sums.
+const LANES: usize = 8;
+
+/// `v` as whole rows of `LANES` values, and the rest.
+#[inline]
+fn lanes(v: &[f32]) -> (impl Iterator<Item = &[f32; LANES]> + Clone, &[f32]) {
+    let c = v.chunks_exact(LANES);
+    let rest = c.remainder();
+    (c.filter_map(|r| <&[f32; LANES]>::try_from(r).ok()), rest)
+}
+
+/// The sum of `LANES` accumulators, added pairwise.
+#[inline]
+fn lane_sum(v: &[f32; LANES]) -> f32 {
+    ((v[0] + v[4]) + (v[1] + v[5])) + ((v[2] + v[6]) + (v[3] + v[7]))
 }
 
 /// An entry of a best-first list: a score and the key that breaks ties

@@ -111,6 +111,7 @@ impl<'a> DistMap<'a> {
 
     /// Distance (m) to the nearest surface at map point `p` and its gradient
     /// (dimensionless), by bilinear interpolation between cell centres.
+    #[inline]
     pub fn sample(&self, p: [f32; 2]) -> Option<(f32, [f32; 2])> {
         let uv = self.cells_of(p);
         let (u, v) = (uv[0] - 0.5, uv[1] - 0.5);
@@ -276,6 +277,15 @@ fn points_pass<const COST: bool, const N: usize>(
     (total, ne)
 }
 
+/// The Gauss-Newton loop's convergence: a step whose absolute entries sum
+/// to less than this (m and rad: a tenth of a millimetre, a tenth of a
+/// milliradian, about 500 times below a 5 cm map cell) is not tried, and
+/// the loop stops after one. Before 2026-12-06 the bound was 1e-5 and
+/// checked only after the line search, so a converged fit spent five
+/// more passes over the points halving a step that could not lower the
+/// cost (docs/performance.md, "A converged refinement stops").
+pub const STEP_TOL: f32 = 1e-4;
+
 /// Solves `h x = g` for `N` unknowns; `None` when singular.
 type Solver<const N: usize> = fn(&[[f32; N]; N], &[f32; N]) -> Option<[f32; N]>;
 
@@ -285,7 +295,7 @@ type Solver<const N: usize> = fn(&[[f32; N]; N], &[f32; N]) -> Option<[f32; N]>;
 /// carry weight) solves the damped system, bounds the step (0.1 in x and
 /// y, 0.05 in the others) and halves it up to four times until the cost
 /// falls; it stops when no step lowers the cost or the step is below
-/// 1e-5. `moved(state, step, scale)` is `state - scale * step`. Returns
+/// [`STEP_TOL`] (such a step is not tried). `moved(state, step, scale)` is `state - scale * step`. Returns
 /// the state and the points that carried weight at the last iteration's
 /// start.
 fn gauss_newton<S: Copy, const N: usize>(
@@ -317,8 +327,13 @@ fn gauss_newton<S: Copy, const N: usize>(
             .map(|(a, v)| libm::fabsf(*v) * if a < 2 { 1.0 } else { 2.0 })
             .fold(0.0f32, f32::max);
         let mut scale = if m > 0.1 { 0.1 / m } else { 1.0 };
+        let size = step.iter().map(|v| libm::fabsf(*v)).sum::<f32>();
         let mut accepted = false;
+        // A step too small to matter is not tried: the state has converged.
         for _ in 0..5 {
+            if scale * size < STEP_TOL {
+                break;
+            }
             let cand = moved(&state, &step, scale);
             let (next, next_ne) = pass(&cand);
             if next < current {
@@ -330,7 +345,7 @@ fn gauss_newton<S: Copy, const N: usize>(
             }
             scale *= 0.5;
         }
-        if !accepted || scale * step.iter().map(|v| libm::fabsf(*v)).sum::<f32>() < 1e-5 {
+        if !accepted || scale * size < STEP_TOL {
             break;
         }
     }

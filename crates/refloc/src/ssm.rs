@@ -267,7 +267,10 @@ pub fn match_scans(
             let diff = lq2 - lr2;
             *m = (diff * diff >= k2 * (lq2 + lr2)) as u8;
         }
-        for (b, _) in reject.iter().enumerate().skip(lo).filter(|(_, &m)| m == 0) {
+        // The pairs that pass, eight flags at a time: most words are all
+        // rejections, and the others give their passes by bit tricks
+        // rather than a hard-to-predict branch per pair.
+        for b in passing(&reject[..nl], lo) {
             let Some((drho, dth2)) =
                 pair_deformation(q_pts, q_tan, r_pts, r_tan, work.tent[a], work.tent[b], dev)
             else {
@@ -299,14 +302,26 @@ pub fn match_scans(
     for v in x.iter_mut() {
         *v = x0;
     }
+    // The entries come in runs of equal `a` (the affinity loop's outer
+    // index), so y[a] is summed in a register over its run; the runs'
+    // lengths are counted once (in `order`, free until the binarization;
+    // a run is shorter than `nl`, so it fits a u16).
+    let runs = &mut work.order[..nl];
+    runs.fill(0);
+    for e in aff {
+        runs[e.a as usize] += 1;
+    }
     for _ in 0..params.ssm.power_iters {
         for v in y.iter_mut() {
             *v = 0.0;
         }
-        // The entries come in runs of equal `a` (the affinity loop's outer
-        // index), so y[a] is summed in a register over its run.
-        for run in aff.chunk_by(|e, f| e.a == f.a) {
-            let a = run[0].a as usize;
+        let mut rest = aff;
+        for (a, &len) in runs.iter().enumerate() {
+            if len == 0 {
+                continue;
+            }
+            let (run, more) = rest.split_at(len as usize);
+            rest = more;
             let xa = x[a];
             let mut ya = 0.0f32;
             for e in run {
@@ -378,6 +393,36 @@ pub fn match_scans(
         tentative: nl as u32,
         nonzeros: nnz as u32,
     })
+}
+
+/// The indices `b >= lo` of `reject` (flags of 0 and 1) whose flag is 0, in
+/// increasing order.
+fn passing(reject: &[u8], lo: usize) -> impl Iterator<Item = usize> + '_ {
+    const ONES: u64 = 0x0101_0101_0101_0101;
+    let lo = lo.min(reject.len());
+    // Whole words from the first multiple of 8 at or after `lo`; the bytes
+    // before it and the tail one at a time.
+    let head_end = lo.next_multiple_of(8).min(reject.len());
+    let words = reject[head_end..].chunks_exact(8);
+    let tail_start = reject.len() - words.remainder().len();
+    let head = (lo..head_end).filter(move |&b| reject[b] == 0);
+    let body = words.enumerate().flat_map(move |(w, c)| {
+        let mut word = [0u8; 8];
+        word.copy_from_slice(c);
+        // A byte of `keep` is 1 where the flag is 0.
+        let mut keep = !u64::from_le_bytes(word) & ONES;
+        let base = head_end + 8 * w;
+        core::iter::from_fn(move || {
+            if keep == 0 {
+                return None;
+            }
+            let b = base + keep.trailing_zeros() as usize / 8;
+            keep &= keep - 1;
+            Some(b)
+        })
+    });
+    let tail = (tail_start..reject.len()).filter(move |&b| reject[b] == 0);
+    head.chain(body).chain(tail)
 }
 
 /// Fills `out` with tentative correspondences: for each of the `nq` input
@@ -701,6 +746,27 @@ mod tests {
             row(10).try_into().expect("a row"),
         );
         assert!(far.abs_diff(2 * DESC_SCALE) <= DESC_LEN as u32, "{far}");
+    }
+
+    #[test]
+    fn passing_lists_the_zero_flags_from_lo_in_order() {
+        let mut seed = 7u32;
+        for len in [0usize, 1, 7, 8, 9, 16, 23, 40] {
+            let flags: Vec<u8> = (0..len)
+                .map(|_| {
+                    seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    (seed >> 29 != 0) as u8
+                })
+                .collect();
+            for lo in 0..=len + 1 {
+                let want: Vec<usize> = (lo..len).filter(|&b| flags[b] == 0).collect();
+                assert_eq!(
+                    passing(&flags, lo).collect::<Vec<_>>(),
+                    want,
+                    "len {len} lo {lo}"
+                );
+            }
+        }
     }
 
     #[test]
