@@ -21,6 +21,8 @@ pub struct DistMap<'a> {
     /// `(sin, cos)` of the grid's yaw, computed once: [`DistMap::sample`]
     /// runs for every point of every refinement step.
     rot: (f32, f32),
+    /// `1 / resolution` (cells per metre), for the same reason.
+    inv_res: f32,
 }
 
 impl<'a> DistMap<'a> {
@@ -44,18 +46,20 @@ impl<'a> DistMap<'a> {
                 libm::sinf(frame.origin.theta),
                 libm::cosf(frame.origin.theta),
             ),
+            inv_res: 1.0 / frame.resolution,
         }
     }
 
-    /// [`MapFrame::to_cells`] with the cached rotation (the same arithmetic).
+    /// [`MapFrame::to_cells`] with the cached rotation and a multiplication
+    /// by the cached `1 / resolution` (the same to rounding).
     #[inline]
     fn cells_of(&self, p: [f32; 2]) -> [f32; 2] {
         let (s, c) = self.rot;
         let f = &self.frame;
         let (dx, dy) = (p[0] - f.origin.x, p[1] - f.origin.y);
         [
-            (c * dx + s * dy) / f.resolution,
-            (-s * dx + c * dy) / f.resolution,
+            (c * dx + s * dy) * self.inv_res,
+            (-s * dx + c * dy) * self.inv_res,
         ]
     }
 
@@ -132,9 +136,10 @@ impl<'a> DistMap<'a> {
             + d01 * (1.0 - fx) * fy
             + d11 * fx * fy)
             * unit;
-        // Gradient in cell axes (per cell), then to the map frame (per metre).
-        let gu = ((d10 - d00) * (1.0 - fy) + (d11 - d01) * fy) * unit / self.frame.resolution;
-        let gv = ((d01 - d00) * (1.0 - fx) + (d11 - d10) * fx) * unit / self.frame.resolution;
+        // Gradient in cell axes (cells per cell: dimensionless, as metres per
+        // metre), then turned into the map frame.
+        let gu = (d10 - d00) * (1.0 - fy) + (d11 - d01) * fy;
+        let gv = (d01 - d00) * (1.0 - fx) + (d11 - d10) * fx;
         let (s, c) = self.rot;
         Some((d, [c * gu - s * gv, s * gu + c * gv]))
     }
@@ -221,6 +226,12 @@ fn points_pass<const COST: bool, const N: usize>(
 ) -> (f32, NormalEquations<N>) {
     let (s, c) = (libm::sinf(pose.theta), libm::cosf(pose.theta));
     let c2 = ROBUST_SCALE * ROBUST_SCALE;
+    // A point at `max_dist` or beyond (or off the map) costs this.
+    let far_cost = if COST {
+        0.5 * c2 * libm::logf(1.0 + max_dist * max_dist / c2)
+    } else {
+        0.0
+    };
     let n = pts.len();
     let mut total = 0.0f32;
     let mut ne = NormalEquations {
@@ -243,21 +254,22 @@ fn points_pass<const COST: bool, const N: usize>(
             (*p, 0.0)
         };
         let m = [pose.x + c * p[0] - s * p[1], pose.y + s * p[0] + c * p[1]];
-        let sample = dm.sample(m);
-        if COST {
-            let d = match sample {
-                Some((d, _)) if d < max_dist => d,
-                _ => max_dist,
-            };
-            total += 0.5 * c2 * libm::logf(1.0 + d * d / c2);
-        }
-        let Some((d, grad)) = sample else {
+        let near = match dm.sample(m) {
+            Some((d, grad)) if d < max_dist => Some((d, grad)),
+            _ => None,
+        };
+        let Some((d, grad)) = near else {
+            // Off the map or farther than `max_dist`: the capped cost only.
+            if COST {
+                total += far_cost;
+            }
             continue;
         };
-        if !(d < max_dist) {
-            continue;
+        let q = d * d / c2;
+        if COST {
+            total += 0.5 * c2 * libm::logf(1.0 + q);
         }
-        let wgt = 1.0 / (1.0 + d * d / c2);
+        let wgt = 1.0 / (1.0 + q);
         let dth = grad[0] * (-s * p[0] - c * p[1]) + grad[1] * (c * p[0] - s * p[1]);
         let mut j = [0.0f32; N];
         j[..3].copy_from_slice(&[grad[0], grad[1], dth]);
@@ -638,13 +650,7 @@ mod tests {
             origin: Pose2::new(0.0, 0.0, 0.0),
         };
         fn dm(data: &[u8], frame: MapFrame) -> DistMap<'_> {
-            DistMap {
-                width: 60,
-                height: 60,
-                data,
-                frame,
-                rot: (0.0, 1.0),
-            }
+            DistMap::new(60, 60, data, frame)
         }
         // Points on the inner faces of all four walls (sensor at the centre).
         let mut pts = Vec::new();
