@@ -734,7 +734,8 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// [`refine::refine_skew`]): beam `k` of `n` points along its direction
     /// turned by `skew * refine::sweep_fraction(k, n)`.
     pub fn verify_pose_skewed(&self, sensor: &Pose2, skew: f32) -> verify::Vicinity {
-        let verifier = verify::Verifier::new(self.db, &self.grid, self.scan.range_max);
+        let verifier =
+            verify::Verifier::with_dist(self.db, &self.grid, self.scan.range_max, self.dm);
         let n = self.scan.beams;
         // A beam with a return points along its point (`in_pts` is the
         // range times the unit direction); the others are skipped.

@@ -121,12 +121,23 @@ impl<'a> Verifier<'a, BitGrid<'a>> {
     /// The verifier of `db` (its grid `grid = db.grid()`, distance map and
     /// parameters) for a sensor of maximum range `range_max` (m).
     pub fn new<D: AsRef<[u8]>>(db: &'a RefDb<D>, grid: &'a BitGrid<'a>, range_max: f32) -> Self {
+        Self::with_dist(db, grid, range_max, DistMap::of(db))
+    }
+
+    /// [`Verifier::new`] with `db`'s distance map `dm` ([`DistMap::of`])
+    /// already made: the localizer keeps one for all its verifications.
+    pub fn with_dist<D: AsRef<[u8]>>(
+        db: &'a RefDb<D>,
+        grid: &'a BitGrid<'a>,
+        range_max: f32,
+        dm: DistMap<'a>,
+    ) -> Self {
         let p = db.params();
         Verifier {
             grid,
             frame: db.frame(),
-            dist: (p.verify.through_max > 0.0).then(|| DistMap::of(db)),
-            open: Some(DistMap::of(db)),
+            dist: (p.verify.through_max > 0.0).then_some(dm),
+            open: Some(dm),
             range_max,
             sigma_d: p.verify.sigma_d,
             accept_ratio: p.verify.accept_ratio,
