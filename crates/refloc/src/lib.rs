@@ -72,7 +72,7 @@ mod mmap;
 
 pub use confidence::Decision;
 pub use db::{DbError, DbErrorKind, RefDb};
-pub use frame::{wrap_angle, MapFrame, Pose2};
+pub use frame::{wrap_angle, MapFrame, Pose2, PoseTrig};
 pub use localize::{
     localize, localize_with_prior, scratch_size, Candidate, Hypothesis, Localization,
     LocalizeError, Localizer, Prepared, RangeScan, Scan, MAX_HYPOTHESES,

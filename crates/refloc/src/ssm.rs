@@ -568,6 +568,7 @@ fn count_inliers(
 ) -> (u32, f32) {
     let mut n = 0;
     let mut res = 0.0;
+    let pose = pose.with_trig();
     for &[i, ii] in acc {
         let p = pose.apply(q[i as usize]);
         let d2 = dist2(p, r[ii as usize]);
@@ -589,9 +590,10 @@ pub fn least_squares(
     thr2: f32,
 ) -> Option<(Pose2, u32)> {
     let (mut n, mut qc, mut rc) = (0u32, [0.0f32; 2], [0.0f32; 2]);
+    let placed = pose.with_trig();
     for &[i, ii] in acc {
         let (qi, ri) = (q[i as usize], r[ii as usize]);
-        if dist2(pose.apply(qi), ri) < thr2 {
+        if dist2(placed.apply(qi), ri) < thr2 {
             n += 1;
             qc = [qc[0] + qi[0], qc[1] + qi[1]];
             rc = [rc[0] + ri[0], rc[1] + ri[1]];
@@ -606,7 +608,7 @@ pub fn least_squares(
     let (mut sdot, mut scross) = (0.0f32, 0.0f32);
     for &[i, ii] in acc {
         let (qi, ri) = (q[i as usize], r[ii as usize]);
-        if dist2(pose.apply(qi), ri) < thr2 {
+        if dist2(placed.apply(qi), ri) < thr2 {
             let (a, b) = (
                 [qi[0] - qc[0], qi[1] - qc[1]],
                 [ri[0] - rc[0], ri[1] - rc[1]],
