@@ -772,6 +772,39 @@ mod tests {
     }
 
     #[test]
+    fn tentative_equals_a_sort_of_all_distances() {
+        // Pseudo-random descriptors with many equal distances (few values).
+        let mut seed = 12345u32;
+        let mut next = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            ((seed >> 24) % 4) as DescBin * 9000
+        };
+        let (nr, nq) = (23, 11);
+        let r: Vec<DescBin> = (0..nr * DESC_LEN).map(|_| next()).collect();
+        let q: Vec<DescBin> = (0..nq * DESC_LEN).map(|_| next()).collect();
+        let row = |d: &[DescBin], i: usize| -> [DescBin; DESC_LEN] {
+            d[i * DESC_LEN..][..DESC_LEN].try_into().unwrap()
+        };
+        for k in 1..=3 {
+            let mut want = Vec::new();
+            for i in 0..nq {
+                let mut d: Vec<(u32, usize)> = (0..nr)
+                    .map(|j| (desc_distance(&row(&q, i), &row(&r, j)), j))
+                    .collect();
+                // Ties go to the lower reference index.
+                d.sort();
+                want.extend(d[..k].iter().map(|&(_, j)| [i as u16, j as u16]));
+            }
+            let mut out = [[0u16; 2]; 64];
+            let n = tentative(nq, nr, k, &q, &r, &mut out);
+            assert_eq!(&out[..n], &want[..], "k {k}");
+        }
+        // Room for fewer rows than asked: whole rows only.
+        let mut out = [[0u16; 2]; 5];
+        assert_eq!(tentative(nq, nr, 2, &q, &r, &mut out), 4);
+    }
+
+    #[test]
     fn tentative_keeps_the_k_closest_with_the_lower_index_on_ties() {
         let mut q = [0 as DescBin; DESC_LEN];
         q[0] = 100;
