@@ -382,10 +382,10 @@ impl<'a> Arena<'a> {
 
 /// The localizer's working arrays, carved from the scratch.
 struct Bufs<'a> {
-    /// The input scan: beam-ordered points (sensor frame, m), angles (rad)
-    /// and ranges (m, infinite = no return), counter-clockwise.
+    /// The input scan: beam-ordered points (sensor frame, m) and ranges
+    /// (m, infinite = no return), counter-clockwise. A beam's direction is
+    /// its point over its range ([`Localizer::verify_pose_skewed`]).
     in_pts: &'a mut [[f32; 2]],
-    in_ang: &'a mut [f32],
     in_rng: &'a mut [f32],
     /// The prepared query: resampled points and tangents.
     q_pts: &'a mut [[f32; 2]],
@@ -408,7 +408,6 @@ struct Bufs<'a> {
 fn carve<'a>(d: &Dims, ar: &mut Arena<'a>) -> Option<Bufs<'a>> {
     Some(Bufs {
         in_pts: ar.take(d.beams)?,
-        in_ang: ar.take(d.beams)?,
         in_rng: ar.take(d.beams)?,
         q_pts: ar.take(d.points)?,
         q_tan: ar.take(d.points)?,
@@ -558,7 +557,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         let b = &mut self.b;
         let params = self.params;
         let n = scan.len();
-        let (valid, fov, wrap, range_max) = load_scan(scan, b.in_pts, b.in_ang, b.in_rng)?;
+        let (valid, fov, wrap, range_max) = load_scan(scan, b.in_pts, b.in_rng)?;
         let needed = params.prep.min_valid_points as usize;
         if valid < needed {
             return Err(LocalizeError::NotEnoughPoints { valid, needed });
@@ -1090,17 +1089,16 @@ pub fn localize_with_prior<'s, D: AsRef<[u8]>>(
     loc.select(&search, examined)
 }
 
-/// Fills dense points, beam angles and ranges in counter-clockwise order.
+/// Fills dense points and ranges in counter-clockwise order.
 /// Returns (valid count, angular coverage in rad, closes a full turn, range_max).
 fn load_scan(
     scan: &Scan<'_>,
     pts: &mut [[f32; 2]],
-    ang: &mut [f32],
     rng: &mut [f32],
 ) -> Result<(usize, f32, bool, f32), LocalizeError> {
     use core::f32::consts::PI;
     let n = scan.len();
-    if n > pts.len() || n > ang.len() || n > rng.len() {
+    if n > pts.len() || n > rng.len() {
         return Err(LocalizeError::TooManyBeams {
             beams: n,
             capacity: pts.len(),
@@ -1136,7 +1134,6 @@ fn load_scan(
                 let a = r.angle_min + src as f32 * inc;
                 let d = r.ranges[src];
                 let ok = d.is_finite() && d >= r.range_min && d <= r.range_max && d > 0.0;
-                ang[k] = a;
                 if ok {
                     rng[k] = d;
                     pts[k] = [d * libm::cosf(a), d * libm::sinf(a)];
@@ -1191,12 +1188,10 @@ fn load_scan(
                 let r = crate::math::norm(p);
                 if keep(&p) {
                     pts[k] = p;
-                    ang[k] = crate::math::atan2(p[1], p[0]);
                     rng[k] = r;
                     valid += 1;
                 } else {
                     pts[k] = [f32::NAN, f32::NAN];
-                    ang[k] = 0.0;
                     rng[k] = f32::INFINITY;
                 }
             }
