@@ -793,21 +793,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         }
         refine::deskew(&mut self.b.in_pts[..n], skew);
         let spread = self.spread_at(&fitted);
-        self.b.cands[best] = Candidate {
-            x: robot.x,
-            y: robot.y,
-            theta: robot.theta,
-            vicinity: v.score,
-            vicinity_threshold: v.threshold,
-            short_beams: v.short,
-            long_beams: v.long,
-            pairs: v.pairs,
-            through_beams: v.through,
-            free_space_ok: v.free_space_ok(p.verify.through_max) as u32,
-            evidence,
-            spread,
-            ..c
-        };
+        self.b.cands[best] = placed(c, &robot, &v, spread, p);
         skew
     }
 
@@ -839,25 +825,14 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
             let p = self.params;
             let (sensor, v) = self.refine_if_promising(self.sensor_pose(site, &m));
             let robot = sensor.compose(&p.sensor.offset.inverse());
-            cand = Candidate {
+            let matched = Candidate {
                 match_score: m.score,
                 matched: m.matched,
                 inliers: m.inliers,
-                x: robot.x,
-                y: robot.y,
-                theta: robot.theta,
-                vicinity: v.score,
-                vicinity_threshold: v.threshold,
                 has_pose: 1,
-                short_beams: v.short,
-                long_beams: v.long,
-                pairs: v.pairs,
-                through_beams: v.through,
-                free_space_ok: v.free_space_ok(p.verify.through_max) as u32,
-                evidence: v.evidence(p.verify.short_weight, p.verify.occlusion_fit),
-                spread: self.spread_at(&sensor),
                 ..cand
             };
+            cand = placed(matched, &robot, &v, self.spread_at(&sensor), p);
             // A pose the prior rules out is no answer.
             if self.prior.is_some_and(|pr| !pr.allows(&robot)) {
                 cand.has_pose = 0;
@@ -992,6 +967,29 @@ fn sensor_to_robot_covariance(c: &[f32; 9], sensor: &Pose2, robot: &Pose2) -> [f
         }
     }
     out
+}
+
+/// `c` placed at robot pose `robot` (map frame), with the vicinity `v` of
+/// its sensor pose and the spread feature `spread`: its pose, vicinity and
+/// evidence fields set from them, the others (site, rank, SSM figures,
+/// `has_pose`) kept. The one record of a verified pose, for the fine stage
+/// and the skew refit.
+fn placed(c: Candidate, robot: &Pose2, v: &verify::Vicinity, spread: f32, p: &Params) -> Candidate {
+    Candidate {
+        x: robot.x,
+        y: robot.y,
+        theta: robot.theta,
+        vicinity: v.score,
+        vicinity_threshold: v.threshold,
+        short_beams: v.short,
+        long_beams: v.long,
+        pairs: v.pairs,
+        through_beams: v.through,
+        free_space_ok: v.free_space_ok(p.verify.through_max) as u32,
+        evidence: v.evidence(p.verify.short_weight, p.verify.occlusion_fit),
+        spread,
+        ..c
+    }
 }
 
 /// A candidate record before (or without) the fine stage.
