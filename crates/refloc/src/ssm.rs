@@ -62,6 +62,19 @@ pub struct SsmWork<'a> {
     pub acc: &'a mut [[u16; 2]],
     /// Flags: input point used / reference point used / correspondence accepted.
     pub flags: &'a mut [u8],
+    /// The reference descriptors bin by bin (`DESC_LEN` columns of the
+    /// reference points), for [`tentative_by_bins`]; shorter than
+    /// `nr * DESC_LEN` makes the match use [`tentative`] instead.
+    pub rcols: &'a mut [DescBin],
+    /// Per reference point: the sum of its bins ([`tentative_by_bins`]),
+    /// at least `nr` of them.
+    pub rsum: &'a mut [u32],
+    /// Per reference point: its shared mass with the input point at hand
+    /// ([`BinWork::shared`]), at least `nr` of them.
+    pub shared: &'a mut [u16],
+    /// Per reference point: its distance to the input point at hand, at
+    /// least `nr` of them.
+    pub dist: &'a mut [u32],
 }
 
 /// What one SSM run found.
@@ -223,14 +236,22 @@ pub fn match_scans(
     if nq < 2 || nr < 2 {
         return None;
     }
-    let nl = tentative(
-        nq,
-        nr,
-        params.ssm.tentative_k as usize,
-        work.qdesc,
-        rdesc,
-        work.tent,
-    );
+    let k = params.ssm.tentative_k as usize;
+    let nl = if work.rcols.len() >= nr * DESC_LEN
+        && work.rsum.len() >= nr
+        && work.shared.len() >= nr
+        && work.dist.len() >= nr
+    {
+        let bins = BinWork {
+            cols: work.rcols,
+            sums: work.rsum,
+            shared: work.shared,
+            dist: work.dist,
+        };
+        tentative_by_bins(nq, nr, k, work.qdesc, rdesc, bins, work.tent)
+    } else {
+        tentative(nq, nr, k, work.qdesc, rdesc, work.tent)
+    };
     let nl = nl
         .min(work.x.len())
         .min(work.y.len())
@@ -448,26 +469,142 @@ pub fn tentative(
         if nl + k > out.len() {
             break;
         }
-        for b in best[..k].iter_mut() {
-            *b = (u32::MAX, 0);
+        let dists = rows(rdesc).take(nr).map(|r| desc_distance(q, r));
+        nl += k_closest(dists, &mut best[..k], i as u16, &mut out[nl..]);
+    }
+    nl
+}
+
+/// Writes `[i, j]` to `out` for the `best.len()` smallest of `dists` (the
+/// lower `j` on a tie), closest first; returns how many (fewer when
+/// `dists` is shorter). `out` must have room for `best.len()`.
+#[inline]
+fn k_closest(
+    dists: impl Iterator<Item = u32>,
+    best: &mut [(u32, u16)],
+    i: u16,
+    out: &mut [[u16; 2]],
+) -> usize {
+    let Some(last) = best.len().checked_sub(1) else {
+        return 0;
+    };
+    best.fill((u32::MAX, 0));
+    for (j, d) in dists.enumerate() {
+        if d < best[last].0 {
+            let mut p = last;
+            while p > 0 && d < best[p - 1].0 {
+                best[p] = best[p - 1];
+                p -= 1;
+            }
+            best[p] = (d, j as u16);
         }
-        for (j, r) in rows(rdesc).take(nr).enumerate() {
-            let d = desc_distance(q, r);
-            if d < best[k - 1].0 {
-                let mut p = k - 1;
-                while p > 0 && d < best[p - 1].0 {
-                    best[p] = best[p - 1];
-                    p -= 1;
+    }
+    let mut n = 0;
+    for (b, o) in best.iter().filter(|b| b.0 != u32::MAX).zip(out.iter_mut()) {
+        *o = [i, b.1];
+        n += 1;
+    }
+    n
+}
+
+/// Working arrays of [`tentative_by_bins`], `nr` reference points long
+/// (`cols` `nr * DESC_LEN`).
+pub struct BinWork<'a> {
+    /// The reference descriptors transposed: bin `t` of point `j` at
+    /// `t * nr + j`.
+    pub cols: &'a mut [DescBin],
+    /// Each reference descriptor's sum of bins.
+    pub sums: &'a mut [u32],
+    /// The reference points' shared mass with the input point at hand.
+    pub shared: &'a mut [u16],
+    /// Their distances to it.
+    pub dist: &'a mut [u32],
+}
+
+/// [`tentative`] with the same output (the same distances and ties), in
+/// a fraction of the work: the L1 distance of two descriptors is
+/// `sum(a) + sum(b) - 2 sum_t min(a_t, b_t)`, and an input descriptor has
+/// few non-empty bins (a point's neighbours lie along its surface), so each
+/// input point takes, for each of its non-empty bins, the minimum against
+/// one column of the transposed reference descriptors, all reference
+/// points at once (which the vector unit does eight at a time), rather than
+/// all 32 bins of every pair. The reference is transposed once per match.
+/// Arrays shorter than `nr` limit the reference points searched.
+pub fn tentative_by_bins(
+    nq: usize,
+    nr: usize,
+    k: usize,
+    qdesc: &[DescBin],
+    rdesc: &[DescBin],
+    work: BinWork<'_>,
+    out: &mut [[u16; 2]],
+) -> usize {
+    let k = k.min(nr).min(crate::params::MAX_TENTATIVE_K as usize);
+    let nr = nr
+        .min(rdesc.len() / DESC_LEN)
+        .min(u16::MAX as usize)
+        .min(work.cols.len() / DESC_LEN)
+        .min(work.sums.len())
+        .min(work.shared.len())
+        .min(work.dist.len());
+    if k == 0 || nr == 0 {
+        return 0;
+    }
+    let (cols, sums, shared, dist) = (
+        &mut work.cols[..nr * DESC_LEN],
+        &mut work.sums[..nr],
+        &mut work.shared[..nr],
+        &mut work.dist[..nr],
+    );
+    for (j, r) in rows(rdesc).take(nr).enumerate() {
+        let mut s = 0u32;
+        for (t, &v) in r.iter().enumerate() {
+            cols[t * nr + j] = v;
+            s += v as u32;
+        }
+        sums[j] = s;
+    }
+    let mut nl = 0usize;
+    let mut best = [(u32::MAX, 0u16); crate::params::MAX_TENTATIVE_K as usize];
+    for (i, q) in rows(qdesc).take(nq.min(u16::MAX as usize)).enumerate() {
+        if nl + k > out.len() {
+            break;
+        }
+        // shared = sum_t min(q_t, r_t) over q's non-empty bins, in 16-bit
+        // lanes: it is at most sum(q), which rounding can put a little
+        // over u16::MAX, so the adds saturate and a saturated sum is
+        // computed again exactly ...
+        shared.fill(0);
+        let mut sq = 0u32;
+        for (&qt, col) in q.iter().zip(cols.chunks_exact(nr)) {
+            if qt == 0 {
+                continue;
+            }
+            sq += qt as u32;
+            for (d, &r) in shared.iter_mut().zip(col) {
+                *d = d.saturating_add(qt.min(r));
+            }
+        }
+        // ... and the L1 distance is sum(q) + sum(r) - 2 shared (a sum of
+        // minima is at most either sum, so nothing wraps).
+        let mut saturated = false;
+        for ((d, &m), &s) in dist.iter_mut().zip(shared.iter()).zip(sums.iter()) {
+            *d = sq + s - 2 * m as u32;
+            saturated |= m == u16::MAX;
+        }
+        if saturated {
+            for ((d, &m), r) in dist.iter_mut().zip(shared.iter()).zip(rows(rdesc)) {
+                if m == u16::MAX {
+                    *d = desc_distance(q, r);
                 }
-                best[p] = (d, j as u16);
             }
         }
-        for b in &best[..k] {
-            if b.0 != u32::MAX {
-                out[nl] = [i as u16, b.1];
-                nl += 1;
-            }
-        }
+        nl += k_closest(
+            dist.iter().copied(),
+            &mut best[..k],
+            i as u16,
+            &mut out[nl..],
+        );
     }
     nl
 }
@@ -798,10 +935,114 @@ mod tests {
             let mut out = [[0u16; 2]; 64];
             let n = tentative(nq, nr, k, &q, &r, &mut out);
             assert_eq!(&out[..n], &want[..], "k {k}");
+            let mut out = [[0u16; 2]; 64];
+            let n = by_bins(nq, nr, k, &q, &r, &mut out);
+            assert_eq!(&out[..n], &want[..], "by bins, k {k}");
         }
         // Room for fewer rows than asked: whole rows only.
         let mut out = [[0u16; 2]; 5];
         assert_eq!(tentative(nq, nr, 2, &q, &r, &mut out), 4);
+        assert_eq!(by_bins(nq, nr, 2, &q, &r, &mut out), 4);
+    }
+
+    /// [`tentative_by_bins`] with arrays of its own.
+    fn by_bins(
+        nq: usize,
+        nr: usize,
+        k: usize,
+        q: &[DescBin],
+        r: &[DescBin],
+        out: &mut [[u16; 2]],
+    ) -> usize {
+        let (mut cols, mut sums, mut shared, mut dist) = (
+            vec![0; nr * DESC_LEN],
+            vec![0u32; nr],
+            vec![0u16; nr],
+            vec![0u32; nr],
+        );
+        let work = BinWork {
+            cols: &mut cols,
+            sums: &mut sums,
+            shared: &mut shared,
+            dist: &mut dist,
+        };
+        tentative_by_bins(nq, nr, k, q, r, work, out)
+    }
+
+    #[test]
+    fn tentative_by_bins_is_exact_where_the_shared_mass_saturates() {
+        // Rows of real descriptors (sums up to DESC_SCALE + rounding), some
+        // nearly equal with sums over u16::MAX: the shared mass of those
+        // pairs saturates its 16-bit lane and must be recomputed.
+        let mut seed = 4242u32;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            seed >> 8
+        };
+        let row = |rnd: &mut dyn FnMut() -> u32, over: bool| {
+            let mut v = [0 as DescBin; DESC_LEN];
+            let bins = 1 + (rnd() % 8) as usize;
+            let mut left = DESC_SCALE;
+            for b in 0..bins {
+                let t = (rnd() as usize) % DESC_LEN;
+                let share = if b + 1 == bins {
+                    left
+                } else {
+                    rnd() % (left + 1)
+                };
+                v[t] = v[t].saturating_add(share as DescBin);
+                left -= share;
+            }
+            if over {
+                // The rounding of up to DESC_LEN bins, all upwards.
+                for b in v.iter_mut().filter(|b| **b > 0 && **b < DescBin::MAX) {
+                    *b += 1;
+                }
+            }
+            v
+        };
+        let (nq, nr) = (40, 60);
+        let mut q = Vec::new();
+        let mut r = Vec::new();
+        for i in 0..nq {
+            let a = row(&mut rnd, i % 2 == 0);
+            q.extend_from_slice(&a);
+        }
+        for j in 0..nr {
+            // Every third reference row a copy of an input row, rounded up.
+            if j % 3 == 0 {
+                let i = (j / 3) % nq;
+                let mut a: [DescBin; DESC_LEN] = q[i * DESC_LEN..][..DESC_LEN].try_into().unwrap();
+                for b in a.iter_mut().filter(|b| **b > 0 && **b < DescBin::MAX) {
+                    *b += 1;
+                }
+                r.extend_from_slice(&a);
+            } else {
+                r.extend_from_slice(&row(&mut rnd, j % 2 == 1));
+            }
+        }
+        // A pair that saturates next to one that does not: q sums 16 over
+        // u16::MAX; reference 1 equals it (distance 0, shared mass over the
+        // lane's range), reference 0 is 2 away. Taking the saturated sum as
+        // it is would put reference 1 at 32 and choose reference 0.
+        let mut one = [0 as DescBin; DESC_LEN];
+        one[3] = 40000;
+        one[12] = 25551;
+        let mut near = one;
+        near[3] -= 1;
+        near[20] = 1;
+        let both: Vec<DescBin> = near.iter().chain(one.iter()).copied().collect();
+        let mut out = [[0u16; 2]; 1];
+        assert_eq!(tentative(1, 2, 1, &one, &both, &mut out), 1);
+        assert_eq!(out[0], [0, 1]);
+        assert_eq!(by_bins(1, 2, 1, &one, &both, &mut out), 1);
+        assert_eq!(out[0], [0, 1]);
+        for k in [1, 2, 4] {
+            let (mut a, mut b) = ([[0u16; 2]; 256], [[0u16; 2]; 256]);
+            let na = tentative(nq, nr, k, &q, &r, &mut a);
+            let nb = by_bins(nq, nr, k, &q, &r, &mut b);
+            assert_eq!(&a[..na], &b[..nb], "k {k}");
+        }
     }
 
     #[test]

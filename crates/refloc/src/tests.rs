@@ -639,6 +639,8 @@ fn ransac_match_recovers_a_rigid_transform_from_exact_correspondences() {
     let (mut x, mut y, mut order) = (vec![0f32; tent], vec![0f32; tent], vec![0u16; tent]);
     let mut acc = vec![[0u16; 2]; np];
     let mut flags = vec![0u8; 3 * np + tent];
+    let mut rcols = vec![0 as ssm::DescBin; np * DESC_LEN];
+    let (mut rsum, mut shared, mut dist) = (vec![0u32; np], vec![0u16; np], vec![0u32; np]);
     for _ in 0..8 {
         let (q_pts, q_tan) = synthetic_prepared(&mut rng);
         let t = random_pose(&mut rng, 4.0);
@@ -657,6 +659,10 @@ fn ransac_match_recovers_a_rigid_transform_from_exact_correspondences() {
             order: &mut order,
             acc: &mut acc,
             flags: &mut flags,
+            rcols: &mut rcols,
+            rsum: &mut rsum,
+            shared: &mut shared,
+            dist: &mut dist,
         };
         let m = ssm::match_scans(&q_pts, &q_tan, &r_pts, &r_tan, &rdesc, &p, &mut work)
             .expect("SSM finds the transform");

@@ -724,6 +724,8 @@ pub fn ssm_match_pair<D: AsRef<[u8]>>(db: &RefDb<D>, pair: &E1Pair) -> E1Trial {
     let (mut x, mut y, mut order) = (vec![0f32; nl], vec![0f32; nl], vec![0u16; nl]);
     let (mut acc, mut flags) = (vec![[0u16; 2]; np], vec![0u8; 3 * np + nl]);
     let mut ends = vec![0f32; 4 * nl];
+    let mut rcols = vec![0 as ssm::DescBin; np * DESC_LEN];
+    let (mut rsum, mut shared, mut dist) = (vec![0u32; np], vec![0u16; np], vec![0u32; np]);
     let mut work = SsmWork {
         qdesc: &mut qd,
         tent: &mut tent,
@@ -734,6 +736,10 @@ pub fn ssm_match_pair<D: AsRef<[u8]>>(db: &RefDb<D>, pair: &E1Pair) -> E1Trial {
         order: &mut order,
         acc: &mut acc,
         flags: &mut flags,
+        rcols: &mut rcols,
+        rsum: &mut rsum,
+        shared: &mut shared,
+        dist: &mut dist,
     };
     let matched = ssm::match_scans(
         &qp[..nq],
