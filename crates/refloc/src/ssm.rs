@@ -377,13 +377,31 @@ pub fn match_scans(
             break;
         }
     }
-    // 4. Greedy binarization with conflict removal.
-    let order = &mut work.order[..nl];
-    for (o, v) in order.iter_mut().enumerate() {
-        *v = o as u16;
+    // 4. Greedy binarization with conflict removal, in decreasing x (the
+    // lower index first on a tie) while x is positive and at least
+    // `binarize_frac` of the largest. Only those entries are sorted (a
+    // tenth of them or so): for finite x they are the prefix of the whole
+    // order the loop would stop after, and a NaN largest x (total order)
+    // stops it at once, as it would.
+    let xmax = x.iter().copied().fold(f32::NEG_INFINITY, |m, v| {
+        if v.total_cmp(&m).is_gt() {
+            v
+        } else {
+            m
+        }
+    });
+    let floor = params.ssm.binarize_frac * xmax;
+    let mut kept = 0usize;
+    if xmax > 0.0 {
+        for (o, &xv) in x.iter().enumerate() {
+            if xv > 0.0 && !(xv < floor) {
+                work.order[kept] = o as u16;
+                kept += 1;
+            }
+        }
     }
+    let order = &mut work.order[..kept];
     order.sort_unstable_by(|&a, &b| x[b as usize].total_cmp(&x[a as usize]).then(a.cmp(&b)));
-    let xmax = x[order[0] as usize];
     let (used, rest) = work.flags.split_at_mut(nq.min(work.flags.len()));
     let (used_r, accf) = rest.split_at_mut(nr.min(rest.len()));
     if used.len() < nq || used_r.len() < nr || accf.len() < nl {
