@@ -714,6 +714,14 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// otherwise it is kept as it is. Without refinement in the database,
     /// the SSM pose and its vicinity.
     pub fn refine_if_promising(&self, sensor: Pose2) -> (Pose2, verify::Vicinity) {
+        let (pose, v, _) = self.refine_if_promising_spread(sensor);
+        (pose, v)
+    }
+
+    /// [`Localizer::refine_if_promising`] and the spread feature of its
+    /// pose ([`Localizer::spread_at`]; a refined pose's from the
+    /// refinement's last pass, the same value).
+    fn refine_if_promising_spread(&self, sensor: Pose2) -> (Pose2, verify::Vicinity, f32) {
         let p = self.params;
         let v = self.verify_pose(&sensor);
         if p.refine.refine_iters == 0
@@ -722,10 +730,19 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
                 v.pairs,
             ) < REFINE_GATE
         {
-            return (sensor, v);
+            return (sensor, v, self.spread_at(&sensor));
         }
-        let refined = self.refine_pose(sensor);
-        (refined, self.verify_pose(&refined))
+        let res = self.db.frame().resolution;
+        let (refined, spread) = refine::refine_with_spread(
+            &self.dm,
+            &self.b.in_pts[..self.scan.beams],
+            sensor,
+            p.refine.refine_iters,
+            p.refine.refine_max_dist,
+            res * COVARIANCE_FLOOR_CELLS,
+        );
+        let spread = confidence::spread_feature(spread, res);
+        (refined, self.verify_pose(&refined), spread)
     }
 
     /// The vicinity score of a sensor pose (map frame) for the prepared scan.
@@ -827,7 +844,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         let mut cand = unexamined(c, &r);
         if let Some(m) = self.match_site(site) {
             let p = self.params;
-            let (sensor, v) = self.refine_if_promising(self.sensor_pose(site, &m));
+            let (sensor, v, spread) = self.refine_if_promising_spread(self.sensor_pose(site, &m));
             let robot = sensor.compose(&p.sensor.offset.inverse());
             let matched = Candidate {
                 match_score: m.score,
@@ -836,7 +853,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
                 has_pose: 1,
                 ..cand
             };
-            cand = placed(matched, &robot, &v, self.spread_at(&sensor), p);
+            cand = placed(matched, &robot, &v, spread, p);
             // A pose the prior rules out is no answer.
             if self.prior.is_some_and(|pr| !pr.allows(&robot)) {
                 cand.has_pose = 0;

@@ -370,7 +370,7 @@ fn gauss_newton<S: Copy, const N: usize>(
     solve: Solver<N>,
     moved: impl Fn(&S, &[f32; N], f32) -> S,
     pass: impl Fn(&S) -> (f32, NormalEquations<N>),
-) -> (S, u32) {
+) -> (S, u32, NormalEquations<N>) {
     let mut state = start;
     let mut used = 0;
     let (mut current, mut ne) = pass(&state);
@@ -414,7 +414,7 @@ fn gauss_newton<S: Copy, const N: usize>(
             break;
         }
     }
-    (state, used)
+    (state, used, ne)
 }
 
 /// Refines the sensor pose `pose` (map frame) so the sensor-frame points
@@ -430,6 +430,19 @@ pub fn refine(
     iters: u32,
     max_dist: f32,
 ) -> (Pose2, u32) {
+    let (pose, used, _) = refine_fit(dm, pts, pose, iters, max_dist);
+    (pose, used)
+}
+
+/// [`refine`], and the normal equations at the refined pose (those of
+/// its last pass, the same as [`normal_equations`] there).
+fn refine_fit(
+    dm: &DistMap<'_>,
+    pts: &[[f32; 2]],
+    pose: Pose2,
+    iters: u32,
+    max_dist: f32,
+) -> (Pose2, u32, NormalEquations) {
     gauss_newton(
         pose,
         iters,
@@ -438,6 +451,20 @@ pub fn refine(
         |p, step, scale| stepped(p, step, scale),
         |p| cost_and_normal_equations(dm, pts, p, max_dist),
     )
+}
+
+/// [`refine`], and the [`position_spread`] of the refined pose from the
+/// refinement's own last pass (no pass more).
+pub fn refine_with_spread(
+    dm: &DistMap<'_>,
+    pts: &[[f32; 2]],
+    pose: Pose2,
+    iters: u32,
+    max_dist: f32,
+    floor_m: f32,
+) -> (Pose2, Option<f32>) {
+    let (pose, _, ne) = refine_fit(dm, pts, pose, iters, max_dist);
+    (pose, spread_of(&ne, floor_m))
 }
 
 /// `pose` less `scale` times the first three entries of `step` (x, y,
@@ -625,8 +652,12 @@ pub fn position_spread(
     max_dist: f32,
     floor_m: f32,
 ) -> Option<f32> {
-    let ne = normal_equations(dm, pts, pose, max_dist);
-    let c = covariance_of(&ne, floor_m)?;
+    spread_of(&normal_equations(dm, pts, pose, max_dist), floor_m)
+}
+
+/// [`position_spread`] from the normal equations at the pose.
+fn spread_of(ne: &NormalEquations, floor_m: f32) -> Option<f32> {
+    let c = covariance_of(ne, floor_m)?;
     // Largest eigenvalue of the symmetric 2x2 block [[a, b], [b, d]].
     let (a, b, d) = (c[0], c[1], c[4]);
     let half = 0.5 * (a - d);
