@@ -208,8 +208,11 @@ fn csail_log_against_csail_map() {
 /// Intel 81.3% / 3.8%, ACES 77.3% / 2.3%, and Intel's false-accept bound
 /// went from 6% to 5%. With the settled-answer stop (2026-12-06): Intel
 /// 80.8% / 3.8%, ACES 75.0% / 2.3%, and a bound on the median number of
-/// candidates examined (Intel 16, ACES 28). The bounds leave a few scans of
-/// slack. Both logs were
+/// candidates examined (Intel 16, ACES 28). With the firm-answer stop
+/// (2026-12-06, sixth session): Intel 81.3% / 3.8%, ACES 76.1% / 3.4%
+/// (one scan more of 88), candidates Intel 16, ACES 19. The bounds leave a
+/// few scans of slack, except ACES's false accepts: 3 of 88 against a bound
+/// of 3.5%, so one more fails it (kept: the whole log stays at 1.8%). Both logs were
 /// used to fit the decision model (docs/confidence.md), so these guard
 /// against regressions; they are not held-out figures.
 #[test]
@@ -232,8 +235,9 @@ fn intel_and_aces_logs_do_not_regress() {
         );
         assert!(r.false_c <= 0.035, "ACES false accepts {}", r.false_c);
         // 28 when set (2026-12-06, with the settled-answer stop; on the whole
-        // log the median went from 41 to 28 with it).
-        assert!(r.examined <= 34, "ACES median candidates {}", r.examined);
+        // log the median went from 41 to 28 with it); 19 with the firm-answer
+        // stop (sixth session; the whole log 28 -> 22).
+        assert!(r.examined <= 24, "ACES median candidates {}", r.examined);
     }
 }
 
