@@ -90,6 +90,11 @@ RULES = {
 }
 for c, k in [(0.8, 12), (0.9, 12), (0.9, 16), (0.9, 20), (0.95, 12)]:
     RULES[f"C 0.98 or C {c} settled {k}"] = (lambda c, k: lambda i, s, p: p >= 0.98 or (s >= k and p >= c))(c, k)
+# The settled stop with a firm one beside it (refloc::select::FIRM_*: 0.95
+# after 10 since 2026-12-06, sixth session).
+for k in [8, 10, 12]:
+    RULES[f"C 0.98 or C 0.9 settled 20 or C 0.95 settled {k}"] = (
+        lambda k: lambda i, s, p: p >= 0.98 or (s >= 20 and p >= 0.9) or (s >= k and p >= 0.95))(k)
 
 
 def main():
