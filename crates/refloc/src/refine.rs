@@ -333,7 +333,10 @@ impl LogProduct {
         self.mantissa = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
     }
 
-    /// `ln` of the product (0 for no factor).
+    /// `ln` of the product (0 for no factor). The power of two's part,
+    /// `exponent ln 2`, reaches thousands for a dense scan far off the map;
+    /// it and the sum are taken in f64 (two operations per pass) so that
+    /// only the final rounding to f32 is added to the mantissa's.
     fn ln(&self) -> f32 {
         if self.overflow {
             return f32::INFINITY;
