@@ -428,10 +428,12 @@ fn carve<'a>(d: &Dims, ar: &mut Arena<'a>) -> Option<Bufs<'a>> {
             order: ar.take(d.tent)?,
             acc: ar.take(d.points)?,
             flags: ar.take(3 * d.points + d.tent)?,
-            rcols: ar.take(d.points * DESC_LEN)?,
-            rsum: ar.take(d.points)?,
-            shared: ar.take(d.points)?,
-            dist: ar.take(d.points)?,
+            bins: ssm::BinWork {
+                cols: ar.take(d.points * DESC_LEN)?,
+                sums: ar.take(d.points)?,
+                shared: ar.take(d.points)?,
+                dist: ar.take(d.points)?,
+            },
         },
     })
 }

@@ -62,19 +62,10 @@ pub struct SsmWork<'a> {
     pub acc: &'a mut [[u16; 2]],
     /// Flags: input point used / reference point used / correspondence accepted.
     pub flags: &'a mut [u8],
-    /// The reference descriptors bin by bin (`DESC_LEN` columns of the
-    /// reference points), for [`tentative_by_bins`]; shorter than
-    /// `nr * DESC_LEN` makes the match use [`tentative`] instead.
-    pub rcols: &'a mut [DescBin],
-    /// Per reference point: the sum of its bins ([`tentative_by_bins`]),
-    /// at least `nr` of them.
-    pub rsum: &'a mut [u32],
-    /// Per reference point: its shared mass with the input point at hand
-    /// ([`BinWork::shared`]), at least `nr` of them.
-    pub shared: &'a mut [u16],
-    /// Per reference point: its distance to the input point at hand, at
-    /// least `nr` of them.
-    pub dist: &'a mut [u32],
+    /// The arrays of [`tentative_by_bins`]; with room for fewer than `nr`
+    /// reference points ([`BinWork::capacity`]) the match uses
+    /// [`tentative`] instead.
+    pub bins: BinWork<'a>,
 }
 
 /// What one SSM run found.
@@ -237,18 +228,8 @@ pub fn match_scans(
         return None;
     }
     let k = params.ssm.tentative_k as usize;
-    let nl = if work.rcols.len() >= nr * DESC_LEN
-        && work.rsum.len() >= nr
-        && work.shared.len() >= nr
-        && work.dist.len() >= nr
-    {
-        let bins = BinWork {
-            cols: work.rcols,
-            sums: work.rsum,
-            shared: work.shared,
-            dist: work.dist,
-        };
-        tentative_by_bins(nq, nr, k, work.qdesc, rdesc, bins, work.tent)
+    let nl = if work.bins.capacity() >= nr {
+        tentative_by_bins(nq, nr, k, work.qdesc, rdesc, &mut work.bins, work.tent)
     } else {
         tentative(nq, nr, k, work.qdesc, rdesc, work.tent)
     };
@@ -550,6 +531,16 @@ pub struct BinWork<'a> {
     pub dist: &'a mut [u32],
 }
 
+impl BinWork<'_> {
+    /// How many reference points the arrays have room for.
+    pub fn capacity(&self) -> usize {
+        (self.cols.len() / DESC_LEN)
+            .min(self.sums.len())
+            .min(self.shared.len())
+            .min(self.dist.len())
+    }
+}
+
 /// [`tentative`] with the same output (the same distances and ties), in
 /// a fraction of the work: the L1 distance of two descriptors is
 /// `sum(a) + sum(b) - 2 sum_t min(a_t, b_t)`, and an input descriptor has
@@ -565,17 +556,14 @@ pub fn tentative_by_bins(
     k: usize,
     qdesc: &[DescBin],
     rdesc: &[DescBin],
-    work: BinWork<'_>,
+    work: &mut BinWork<'_>,
     out: &mut [[u16; 2]],
 ) -> usize {
     let k = k.min(nr).min(crate::params::MAX_TENTATIVE_K as usize);
     let nr = nr
         .min(rdesc.len() / DESC_LEN)
         .min(u16::MAX as usize)
-        .min(work.cols.len() / DESC_LEN)
-        .min(work.sums.len())
-        .min(work.shared.len())
-        .min(work.dist.len());
+        .min(work.capacity());
     if k == 0 || nr == 0 {
         return 0;
     }
@@ -1024,13 +1012,13 @@ mod tests {
             vec![0u16; nr],
             vec![0u32; nr],
         );
-        let work = BinWork {
+        let mut work = BinWork {
             cols: &mut cols,
             sums: &mut sums,
             shared: &mut shared,
             dist: &mut dist,
         };
-        tentative_by_bins(nq, nr, k, q, r, work, out)
+        tentative_by_bins(nq, nr, k, q, r, &mut work, out)
     }
 
     #[test]

@@ -659,10 +659,12 @@ fn ransac_match_recovers_a_rigid_transform_from_exact_correspondences() {
             order: &mut order,
             acc: &mut acc,
             flags: &mut flags,
-            rcols: &mut rcols,
-            rsum: &mut rsum,
-            shared: &mut shared,
-            dist: &mut dist,
+            bins: ssm::BinWork {
+                cols: &mut rcols,
+                sums: &mut rsum,
+                shared: &mut shared,
+                dist: &mut dist,
+            },
         };
         let m = ssm::match_scans(&q_pts, &q_tan, &r_pts, &r_tan, &rdesc, &p, &mut work)
             .expect("SSM finds the transform");

@@ -736,10 +736,12 @@ pub fn ssm_match_pair<D: AsRef<[u8]>>(db: &RefDb<D>, pair: &E1Pair) -> E1Trial {
         order: &mut order,
         acc: &mut acc,
         flags: &mut flags,
-        rcols: &mut rcols,
-        rsum: &mut rsum,
-        shared: &mut shared,
-        dist: &mut dist,
+        bins: ssm::BinWork {
+            cols: &mut rcols,
+            sums: &mut rsum,
+            shared: &mut shared,
+            dist: &mut dist,
+        },
     };
     let matched = ssm::match_scans(
         &qp[..nq],
