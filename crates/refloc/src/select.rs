@@ -213,7 +213,13 @@ pub enum Next {
 /// [`EARLY_CONFIDENCE`] after [`EARLY_CONFIDENCE_MIN`] candidates, or
 /// [`SETTLED_CONFIDENCE`] after staying the best over
 /// [`SETTLED_CANDIDATES`] more (or [`FIRM_CONFIDENCE`] over
-/// [`FIRM_CANDIDATES`] more), starts the same confirmation.
+/// [`FIRM_CANDIDATES`] more), starts the same confirmation. With a model,
+/// a confirmation that ends on an answer the model would reject (a twin
+/// found, or a match that explains the beams yet is not convincing) does
+/// not end the search: it goes on down the list, where a later stop may
+/// fire. On maps of many places alike (a warehouse's rack aisles) the
+/// right place is often ranked below a look-alike that explains 90% of the
+/// beams (docs/performance.md, "A rejected stop searches on").
 #[derive(Clone, Copy, Debug)]
 pub struct Search {
     selection: Selection,
@@ -265,6 +271,15 @@ impl Search {
         }
     }
 
+    /// True when the search has a model and candidate `b` as the answer
+    /// among `cands` would be rejected by it ([`accepted_with`]).
+    fn would_reject(&self, cands: &[Candidate], b: usize) -> bool {
+        match (self.decision, cands.get(b)) {
+            (Some(d), Some(c)) => !accepted_with(c, self.confidence(cands, b), &d),
+            _ => false,
+        }
+    }
+
     /// The index of the best candidate recorded so far.
     pub fn best(&self) -> Option<usize> {
         self.best
@@ -282,6 +297,15 @@ impl Search {
             return Next::Examine;
         };
         if gamma < floor || self.confirmed >= CONFIRM_MAX {
+            if self.would_reject(cands, b) {
+                // The stop's answer, confirmed, would be rejected: the
+                // place may be one of several alike (racks, rows of
+                // offices) and the right one further down the list. Search
+                // on; a later stop may fire again.
+                self.floor = None;
+                self.confirmed = 0;
+                return Next::Examine;
+            }
             return Next::Stop;
         }
         let (dx, dy) = (site_xy[0] - cands[b].x, site_xy[1] - cands[b].y);
@@ -765,6 +789,44 @@ mod tests {
             s.record(&c, 0.9);
         }
         assert!(!s.stopping());
+    }
+
+    #[test]
+    fn a_stop_whose_answer_the_model_rejects_searches_on() {
+        // A confident match (one beam short), then a twin as good among the
+        // rivals the confirmation examines: the answer is ambiguous, so
+        // the model rejects it, and the search goes on below the floor (the
+        // right place may be further down the list) instead of stopping.
+        let p = params();
+        let mut with = Search::new(&p).with_decision(Decision::DEFAULT);
+        let mut without = Search::new(&p);
+        let mut cands = vec![cand(0.0, 0.0, 0.0, 77.0, 1)];
+        with.record(&cands, 0.9);
+        without.record(&cands, 0.9);
+        assert!(with.stopping() && without.stopping());
+        assert_eq!(with.next(0.88, [10.0, 0.0], &cands), Next::Examine);
+        assert_eq!(without.next(0.88, [10.0, 0.0], &cands), Next::Examine);
+        cands.push(cand(10.0, 0.0, 0.0, 76.5, 1));
+        with.record(&cands, 0.88);
+        without.record(&cands, 0.88);
+        assert!(with.confidence(&cands, 0) <= AMBIGUOUS_CONFIDENCE);
+        assert_eq!(with.next(0.8, [30.0, 0.0], &cands), Next::Examine);
+        assert!(!with.stopping());
+        // Without a model the stop stands.
+        assert_eq!(without.next(0.8, [30.0, 0.0], &cands), Next::Stop);
+        // A later confident match that explains far more, pinned by walls
+        // all round and found from four sites, stops it again, for good.
+        for k in 0..4 {
+            let mut pinned = cand(30.0 + 0.01 * k as f32, 0.0, 0.0, 90.0, 0);
+            pinned.spread = 0.15;
+            cands.push(pinned);
+            with.record(&cands, 0.8);
+        }
+        assert!(with.stopping());
+        assert_eq!(with.best(), Some(2));
+        let p2 = with.confidence(&cands, 2);
+        assert!(p2 >= Decision::DEFAULT.threshold, "{p2}");
+        assert_eq!(with.next(0.7, [40.0, 0.0], &cands), Next::Stop);
     }
 
     #[test]
