@@ -14,7 +14,9 @@
 //!   `ROBOTLASERk` lines are scans; `PARAM robot_front_laser_max` /
 //!   `robot_rear_laser_max` set the maximum range of the `FLASER` / `RLASER`
 //!   lines after them; every other keyword line (`ODOM`, `PARAM`, `SYNC`,
-//!   `TRUEPOS`, `RAWLASERk`, ...) and `#` comments are skipped. See
+//!   `TRUEPOS`, `RAWLASERk`, ...) and `#` comments are skipped (a log
+//!   with `RAWLASERk` lines and no scan line ends with a
+//!   [`ScanErrorKind::RawLaserOnly`] item rather than looking empty). See
 //!   [`carmen_angle_increment`] for the beam geometry of `FLASER`/`RLASER`.
 //!
 //! This is a hostile-input reader: it never panics, never buffers a line
@@ -254,6 +256,15 @@ pub enum ScanErrorKind {
     /// field and the value.
     #[error("{0}")]
     Invalid(String),
+    /// A CARMEN log that ended with `RAWLASERk` lines (their count) and no
+    /// line this reader takes as a scan. Raw laser lines are not read: a
+    /// log that has them usually has each scan again as a `FLASER`,
+    /// `RLASER` or `ROBOTLASERk` line, which carries the pose.
+    #[error(
+        "the log has {0} RAWLASERk lines and no FLASER, RLASER or ROBOTLASERk line: raw laser \
+         lines are not read; give the scans as FLASER or ROBOTLASER1 lines, or as JSON Lines"
+    )]
+    RawLaserOnly(usize),
     /// A bag whose records end early or are damaged (the stream ends here).
     #[error(
         "bag ends early or is damaged after byte {byte} ({what}); {read} messages of {topic} read"
@@ -573,7 +584,9 @@ impl<R: BufRead> Iterator for Scans<R> {
 
     fn next(&mut self) -> Option<Self::Item> {
         loop {
-            let (line, raw) = self.lines.next_line()?;
+            let Some((line, raw)) = self.lines.next_line() else {
+                return self.carmen.raw_only_notice();
+            };
             let text = match raw {
                 RawLine::Text(t) => t,
                 RawLine::Failed(e) => {
@@ -782,6 +795,13 @@ struct CarmenState {
     front_max: Option<f32>,
     /// `PARAM robot_rear_laser_max` (m).
     rear_max: Option<f32>,
+    /// `RAWLASERk` lines seen (not read), for the notice at the end of a
+    /// log that has nothing else.
+    raw_lines: usize,
+    /// The line of the first of them.
+    first_raw_line: usize,
+    /// Whether that notice was given.
+    noticed: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -804,7 +824,28 @@ fn laser_kind(keyword: &[u8]) -> Option<LaserKind> {
     }
 }
 
+/// True for `RAWLASERk` (k one or more digits).
+fn is_raw_laser(keyword: &[u8]) -> bool {
+    matches!(keyword, [b'R', b'A', b'W', b'L', b'A', b'S', b'E', b'R', rest @ ..]
+        if !rest.is_empty() && rest.iter().all(u8::is_ascii_digit))
+}
+
 impl CarmenState {
+    /// At the end of the input: once, an error item (at the first
+    /// `RAWLASERk` line) when the log had such lines and no scan line, so
+    /// that it does not look empty.
+    fn raw_only_notice(&mut self) -> Option<Result<InputScan, ScanError>> {
+        if self.noticed || self.scans > 0 || self.raw_lines == 0 {
+            return None;
+        }
+        self.noticed = true;
+        Some(Err(ScanError {
+            id: None,
+            line: self.first_raw_line,
+            kind: ScanErrorKind::RawLaserOnly(self.raw_lines),
+        }))
+    }
+
     /// Counts a (too long) line as a scan if it starts with a laser keyword,
     /// returning its id.
     fn count_if_laser(&mut self, prefix: &[u8]) -> Option<String> {
@@ -826,6 +867,13 @@ impl CarmenState {
         let Some(kind) = laser_kind(kw) else {
             if kw == b"PARAM" {
                 self.param(text);
+                return None;
+            }
+            if is_raw_laser(kw) {
+                if self.raw_lines == 0 {
+                    self.first_raw_line = line;
+                }
+                self.raw_lines = self.raw_lines.saturating_add(1);
                 return None;
             }
             if is_keyword(kw) {

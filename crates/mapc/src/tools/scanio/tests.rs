@@ -1349,3 +1349,25 @@ fn shared_carmen_logs() {
         }
     }
 }
+
+#[test]
+fn carmen_raw_laser_only_log_says_so_at_the_end() {
+    let raw = "RAWLASER1 0 -1.5708 3.14159 0.0175 81.9 0.01 0 3 2.0 2.0 2.0 0 1.0 host 1.0";
+    let log =
+        format!("PARAM robot_front_laser_max 50\nODOM 1 2 3 0 0 0 1.0 host 1.0\n{raw}\n{raw}\n");
+    let items = read(&log, InputFormat::Auto);
+    assert_eq!(items.len(), 1, "{items:?}");
+    let e = items[0].as_ref().unwrap_err();
+    assert_eq!(e.kind, ScanErrorKind::RawLaserOnly(2));
+    assert_eq!(e.line, 3, "points at the first raw laser line");
+    assert!(e.to_string().contains("2 RAWLASERk lines"), "{e}");
+    // With a scan line too, the raw ones are skipped silently, as before.
+    let tail = "1 2 3 1134863807.7 b21 12.5";
+    let mixed = format!("{raw}\n{}\n{raw}\n", flaser(180, 2.0, tail));
+    let items = read(&mixed, InputFormat::Carmen);
+    assert_eq!(items.len(), 1);
+    assert_eq!(items[0].as_ref().unwrap().id, "scan 0");
+    // RAWLASER alone is not a laser keyword of any other kind.
+    assert!(!is_raw_laser(b"RAWLASER") && is_raw_laser(b"RAWLASER12"));
+    assert!(read("ODOM 1 2 3 0 0 0 1.0 host 1.0\n", InputFormat::Carmen).is_empty());
+}
