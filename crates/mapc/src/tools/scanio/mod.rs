@@ -800,8 +800,6 @@ struct CarmenState {
     raw_lines: usize,
     /// The line of the first of them.
     first_raw_line: usize,
-    /// Whether that notice was given.
-    noticed: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -835,14 +833,15 @@ impl CarmenState {
     /// `RAWLASERk` line) when the log had such lines and no scan line, so
     /// that it does not look empty.
     fn raw_only_notice(&mut self) -> Option<Result<InputScan, ScanError>> {
-        if self.noticed || self.scans > 0 || self.raw_lines == 0 {
+        // Taking the count gives the notice once: a later call sees none.
+        let raw_lines = core::mem::take(&mut self.raw_lines);
+        if self.scans > 0 || raw_lines == 0 {
             return None;
         }
-        self.noticed = true;
         Some(Err(ScanError {
             id: None,
             line: self.first_raw_line,
-            kind: ScanErrorKind::RawLaserOnly(self.raw_lines),
+            kind: ScanErrorKind::RawLaserOnly(raw_lines),
         }))
     }
 
