@@ -1,0 +1,66 @@
+#!/usr/bin/env bash
+# Localizes each shared real log on maps made from that log's own corrected
+# poses (scripts/map-from-log.py), where the map agrees with the truth, and
+# prints accepted-and-correct / false accepts against the given truth
+# (docs/results.md, "Maps made from the logs themselves"). Needs ../shared
+# (logs) and numpy (the Python package's venv, python/target/venv, made by
+# scripts/python-test.sh, or PYTHON=...).
+#
+#   scripts/log-maps.sh [OUT_DIR]   (default build-artifacts/log-maps)
+#
+# Two settings per log:
+#   self  the map from every scan; every scan localized on it;
+#   half  two maps, from the first and from the second half of the scans;
+#         each scan localized on the map of the other half (another time of
+#         the same building: people, doors, and places that half never saw).
+# About 2 minutes on 2 cores after the release build.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+S=${SHARED:-../shared}
+O=${1:-build-artifacts/log-maps}
+M=target/release/mapc
+PY=${PYTHON:-python/target/venv/bin/python}
+if [ ! -d "$S/logs" ]; then
+  echo "log-maps.sh: needs the shared logs at $S (set SHARED=...)" >&2
+  exit 2
+fi
+if ! "$PY" -c "import numpy" 2> /dev/null; then
+  echo "log-maps.sh: needs a Python with numpy (run scripts/python-test.sh once, or set PYTHON=...)" >&2
+  exit 2
+fi
+cargo build --release -q -p mapc
+mkdir -p "$O"
+for m in intel aces csail; do
+  L="$S/logs/$m/$m-corrected.log.gz"
+  n=$(zcat "$L" | grep -c '^FLASER')
+  h=$((n / 2))
+  "$PY" scripts/map-from-log.py "$L" "$O" "$m-self"
+  "$PY" scripts/map-from-log.py "$L" "$O" "$m-h1" --map-scans ":$h"
+  "$PY" scripts/map-from-log.py "$L" "$O" "$m-h2" --map-scans "$h:"
+  for p in self h1 h2; do
+    $M build -q "$O/$m-$p.yaml" -o "$O/$m-$p.refdb"
+    $M localize -q --no-verify "$O/$m-$p.refdb" "$L" --truth "$O/$m-self-truth.txt" > "$O/$m-$p.jsonl"
+  done
+  # Each scan on the map of the half it is not in.
+  { tail -n +$((h + 1)) "$O/$m-h1.jsonl"; head -n "$h" "$O/$m-h2.jsonl"; } > "$O/$m-half.jsonl"
+done
+python3 - "$O" <<'PY'
+import json, math, sys
+o = sys.argv[1]
+def wrap(a): return (a + math.pi) % (2 * math.pi) - math.pi
+print(f"{'set':12} {'scans':>5}  accepted and correct / false accepts (%, given truth; 0.3 m, 5 deg)")
+for m in ("intel", "aces", "csail"):
+    for s in ("self", "half"):
+        rows = [json.loads(l) for l in open(f"{o}/{m}-{s}.jsonl")]
+        ok = bad = 0
+        for r in rows:
+            if not r.get("accepted"):
+                continue
+            t = r["truth"]
+            if math.hypot(r["x"] - t[0], r["y"] - t[1]) < 0.3 and abs(wrap(r["theta"] - t[2])) < math.radians(5):
+                ok += 1
+            else:
+                bad += 1
+        n = len(rows)
+        print(f"{m + '-' + s:12} {n:5}  {100 * ok / n:5.1f} / {100 * bad / n:4.1f}")
+PY
