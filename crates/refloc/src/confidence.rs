@@ -22,7 +22,9 @@
 //!   consistency, graded rather than the pass/fail check;
 //! - **spread**: how loosely the scan pins the position, `ln` of
 //!   [`crate::refine::position_spread`] (the fit's position standard
-//!   deviation along its worst direction, per point) in map cells: small
+//!   deviation along its worst direction, per point) in units of
+//!   [`SPREAD_UNIT`] (a fixed length, not the map's cell, so that the
+//!   feature means the same on maps of any resolution): small
 //!   where walls all round pin the pose and the points lie on them, large
 //!   along a featureless corridor, which is where a pose slid along it or
 //!   turned end for end elsewhere fits as well as the right one.
@@ -41,18 +43,31 @@ use crate::verify;
 /// Number of features of the model.
 pub const FEATURES: usize = 5;
 
-/// Bound of the spread feature (`ln` of cells): a larger spread, a pose
-/// without one, or a degenerate fit, count as this.
+/// Bound of the spread feature (`ln` of [`SPREAD_UNIT`]s): a larger
+/// spread, a pose without one, or a degenerate fit, count as this.
 pub const SPREAD_MAX: f32 = 3.0;
 
+/// The spread feature's unit (m): the cell size of the maps the default
+/// model was fitted on. A fixed length rather than the map's cell: the
+/// position spread is a length (the fit's residuals in metres times the
+/// geometry's leverage), which on real scans is about the same on a map of
+/// 0.025 m cells as on one of 0.05 m (median of right answers: Intel 0.041
+/// and 0.042 m) and larger on one of 0.1 m (0.073 m: its surfaces are
+/// placed to within 5 cm only). Measured in cells, as before, the same fit
+/// looked twice as loose on a 0.025 m map (real Intel scans: 47.5% accepted
+/// and right instead of 80.7%) and twice as tight on a 0.1 m map (9.7%
+/// false accepts instead of 3.1%) (docs/results.md, "Maps of other
+/// resolutions").
+pub const SPREAD_UNIT: f32 = 0.05;
+
 /// The spread feature of a position spread (m,
-/// [`crate::refine::position_spread`]) on a map of `resolution` (m):
-/// `ln(spread / resolution)` within +-[`SPREAD_MAX`]; [`SPREAD_MAX`] for
-/// `None`.
-pub fn spread_feature(spread: Option<f32>, resolution: f32) -> f32 {
+/// [`crate::refine::position_spread`]): `ln(spread / SPREAD_UNIT)` within
+/// +-[`SPREAD_MAX`]; [`SPREAD_MAX`] for `None` or a spread that is not a
+/// positive number.
+pub fn spread_feature(spread: Option<f32>) -> f32 {
     match spread {
-        Some(s) if s > 0.0 && resolution > 0.0 => {
-            let f = libm::logf(s / resolution);
+        Some(s) if s > 0.0 => {
+            let f = libm::logf(s / SPREAD_UNIT);
             if f.is_finite() {
                 f.clamp(-SPREAD_MAX, SPREAD_MAX)
             } else {
@@ -262,13 +277,14 @@ mod tests {
     }
 
     #[test]
-    fn spread_feature_is_log_cells_and_bounded() {
-        assert!((spread_feature(Some(0.05), 0.05)).abs() < 1e-6);
-        assert!((spread_feature(Some(0.1), 0.05) - 2f32.ln()).abs() < 1e-6);
-        assert_eq!(spread_feature(Some(1e6), 0.05), SPREAD_MAX);
-        assert_eq!(spread_feature(Some(1e-9), 0.05), -SPREAD_MAX);
-        assert_eq!(spread_feature(None, 0.05), SPREAD_MAX);
-        assert_eq!(spread_feature(Some(f32::NAN), 0.05), SPREAD_MAX);
+    fn spread_feature_is_log_units_and_bounded() {
+        assert!((spread_feature(Some(SPREAD_UNIT))).abs() < 1e-6);
+        assert!((spread_feature(Some(2.0 * SPREAD_UNIT)) - 2f32.ln()).abs() < 1e-6);
+        assert_eq!(spread_feature(Some(1e6)), SPREAD_MAX);
+        assert_eq!(spread_feature(Some(1e-9)), -SPREAD_MAX);
+        assert_eq!(spread_feature(None), SPREAD_MAX);
+        assert_eq!(spread_feature(Some(f32::NAN)), SPREAD_MAX);
+        assert_eq!(spread_feature(Some(-1.0)), SPREAD_MAX);
     }
 
     #[test]

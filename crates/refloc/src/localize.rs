@@ -184,8 +184,9 @@ pub struct Candidate {
     /// beam (see [`crate::verify::Vicinity::evidence`]); selection,
     /// ambiguity and acceptance compare it with the threshold.
     pub evidence: f32,
-    /// How loosely the scan pins the position: `ln(spread / resolution)`
-    /// of [`crate::refine::position_spread`] at this pose, clamped to
+    /// How loosely the scan pins the position: `ln(spread / SPREAD_UNIT)`
+    /// ([`crate::confidence::spread_feature`]) of
+    /// [`crate::refine::position_spread`] (m) at this pose, clamped to
     /// +-[`crate::confidence::SPREAD_MAX`]; the maximum with no pose or a
     /// degenerate fit. A feature of the confidence ([`crate::confidence`]).
     pub spread: f32,
@@ -743,7 +744,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
             p.refine.refine_max_dist,
             res * COVARIANCE_FLOOR_CELLS,
         );
-        let spread = confidence::spread_feature(spread, res);
+        let spread = confidence::spread_feature(spread);
         (refined, self.verify_pose(&refined), spread)
     }
 
@@ -832,7 +833,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
             p.refine.refine_max_dist,
             res * COVARIANCE_FLOOR_CELLS,
         );
-        confidence::spread_feature(spread, res)
+        confidence::spread_feature(spread)
     }
 
     /// Stage 3, the fine stage on coarse candidate `c`: SSM against its
