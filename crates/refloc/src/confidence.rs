@@ -23,8 +23,9 @@
 //! - **spread**: how loosely the scan pins the position, `ln` of
 //!   [`crate::refine::position_spread`] (the fit's position standard
 //!   deviation along its worst direction, per point) in units of
-//!   [`SPREAD_UNIT`] (a fixed length, not the map's cell, so that the
-//!   feature means the same on maps of any resolution): small
+//!   [`spread_unit`] (0.05 m on a map of 0.05 m cells, and only a quarter
+//!   power of the cell size on others, so that the feature means about
+//!   the same on maps of any resolution): small
 //!   where walls all round pin the pose and the points lie on them, large
 //!   along a featureless corridor, which is where a pose slid along it or
 //!   turned end for end elsewhere fits as well as the right one.
@@ -47,27 +48,57 @@ pub const FEATURES: usize = 5;
 /// spread, a pose without one, or a degenerate fit, count as this.
 pub const SPREAD_MAX: f32 = 3.0;
 
-/// The spread feature's unit (m): the cell size of the maps the default
-/// model was fitted on. A fixed length rather than the map's cell: the
-/// position spread is a length (the fit's residuals in metres times the
-/// geometry's leverage), which on real scans is about the same on a map of
-/// 0.025 m cells as on one of 0.05 m (median of right answers: Intel 0.041
-/// and 0.042 m) and larger on one of 0.1 m (0.073 m: its surfaces are
-/// placed to within 5 cm only). Measured in cells, as before, the same fit
-/// looked twice as loose on a 0.025 m map (real Intel scans: 47.5% accepted
-/// and right instead of 80.7%) and twice as tight on a 0.1 m map (9.7%
-/// false accepts instead of 3.1%) (docs/results.md, "Maps of other
-/// resolutions").
+/// The spread feature's unit (m) on a map of 0.05 m cells, the cell size
+/// of every map the default model was fitted on; on a map of cell `res`
+/// the unit is `SPREAD_UNIT (res / SPREAD_UNIT)^SPREAD_CELL_EXPONENT`
+/// ([`spread_unit`]).
 pub const SPREAD_UNIT: f32 = 0.05;
 
+/// How much of the spread's unit follows the map's cell size: 0 would
+/// measure the spread in metres, 1 in cells (docs/results.md, "Maps of
+/// other resolutions"). The position spread is a length (the fit's
+/// residuals times the geometry's leverage) that grows with the cell on a
+/// map made at that cell (right answers of real scans on maps made from
+/// the logs themselves: about 0.030, 0.047 and 0.077 m at 0.025, 0.05 and
+/// 0.1 m cells) but not on a map only resampled finer (0.041 and 0.042 m
+/// at 0.025 and 0.05). Measured in cells (1), as before, a 0.025 m map
+/// made every fit look twice as loose and a 0.1 m map twice as tight (real
+/// Intel scans: 47.5% accepted and right on the shared map split to 0.025
+/// m, 9.7% false accepts on it merged to 0.1 m, against 80.7 / 3.1 at
+/// 0.05). The exponent was chosen among 0, 0.25, 0.5, 0.75 and 1 on the
+/// Intel and ACES logs on their maps resampled to 0.025 and 0.1 m and on
+/// maps made from the logs at those cells (accepted and correct less ten
+/// times the false accepts, summed), and reported on the CSAIL log's
+/// (held out).
+pub const SPREAD_CELL_EXPONENT: f32 = 0.25;
+
+/// The spread feature's unit (m) on a map of cell `resolution` (m); see
+/// [`SPREAD_CELL_EXPONENT`]. [`SPREAD_UNIT`] for a resolution that is not
+/// a positive number.
+pub fn spread_unit(resolution: f32) -> f32 {
+    if resolution > 0.0 && resolution.is_finite() {
+        SPREAD_UNIT * libm::powf(resolution / SPREAD_UNIT, SPREAD_CELL_EXPONENT)
+    } else {
+        SPREAD_UNIT
+    }
+}
+
 /// The spread feature of a position spread (m,
-/// [`crate::refine::position_spread`]): `ln(spread / SPREAD_UNIT)` within
-/// +-[`SPREAD_MAX`]; [`SPREAD_MAX`] for `None` or a spread that is not a
-/// positive number.
-pub fn spread_feature(spread: Option<f32>) -> f32 {
+/// [`crate::refine::position_spread`]) on a map of cell `resolution` (m):
+/// `ln(spread / spread_unit(resolution))` within +-[`SPREAD_MAX`];
+/// [`SPREAD_MAX`] for `None` or a spread that is not a positive number.
+/// On a 0.05 m map it is `ln(spread / 0.05 m)`.
+pub fn spread_feature(spread: Option<f32>, resolution: f32) -> f32 {
     match spread {
         Some(s) if s > 0.0 => {
-            let f = libm::logf(s / SPREAD_UNIT);
+            // ln(s / unit), written so that a 0.05 m map gives exactly
+            // ln(s / SPREAD_UNIT) (the second term is then ln 1 = 0).
+            let cell = if resolution > 0.0 && resolution.is_finite() {
+                SPREAD_CELL_EXPONENT * libm::logf(resolution / SPREAD_UNIT)
+            } else {
+                0.0
+            };
+            let f = libm::logf(s / SPREAD_UNIT) - cell;
             if f.is_finite() {
                 f.clamp(-SPREAD_MAX, SPREAD_MAX)
             } else {
@@ -278,13 +309,38 @@ mod tests {
 
     #[test]
     fn spread_feature_is_log_units_and_bounded() {
-        assert!((spread_feature(Some(SPREAD_UNIT))).abs() < 1e-6);
-        assert!((spread_feature(Some(2.0 * SPREAD_UNIT)) - 2f32.ln()).abs() < 1e-6);
-        assert_eq!(spread_feature(Some(1e6)), SPREAD_MAX);
-        assert_eq!(spread_feature(Some(1e-9)), -SPREAD_MAX);
-        assert_eq!(spread_feature(None), SPREAD_MAX);
-        assert_eq!(spread_feature(Some(f32::NAN)), SPREAD_MAX);
-        assert_eq!(spread_feature(Some(-1.0)), SPREAD_MAX);
+        let res = 0.05;
+        assert_eq!(spread_feature(Some(SPREAD_UNIT), res), 0.0);
+        assert!((spread_feature(Some(2.0 * SPREAD_UNIT), res) - 2f32.ln()).abs() < 1e-6);
+        assert_eq!(spread_feature(Some(1e6), res), SPREAD_MAX);
+        assert_eq!(spread_feature(Some(1e-9), res), -SPREAD_MAX);
+        assert_eq!(spread_feature(None, res), SPREAD_MAX);
+        assert_eq!(spread_feature(Some(f32::NAN), res), SPREAD_MAX);
+        assert_eq!(spread_feature(Some(-1.0), res), SPREAD_MAX);
+        // A bad resolution counts as 0.05 m.
+        assert_eq!(
+            spread_feature(Some(0.1), f32::NAN),
+            spread_feature(Some(0.1), res)
+        );
+        assert_eq!(
+            spread_feature(Some(0.1), 0.0),
+            spread_feature(Some(0.1), res)
+        );
+    }
+
+    #[test]
+    fn the_spread_unit_follows_a_quarter_power_of_the_cell() {
+        assert_eq!(spread_unit(0.05), SPREAD_UNIT);
+        // Half the cell: the unit shrinks by 2^-1/4, not by half.
+        assert!((spread_unit(0.025) - 0.05 * 0.5f32.powf(0.25)).abs() < 1e-6);
+        assert!((spread_unit(0.1) - 0.05 * 2f32.powf(0.25)).abs() < 1e-6);
+        // The feature is the log of the spread in that unit.
+        for res in [0.025f32, 0.1] {
+            let s = 0.07;
+            let f = spread_feature(Some(s), res);
+            assert!((f - (s / spread_unit(res)).ln()).abs() < 1e-5, "{res}: {f}");
+        }
+        assert_eq!(spread_unit(-1.0), SPREAD_UNIT);
     }
 
     #[test]

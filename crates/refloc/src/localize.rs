@@ -184,8 +184,8 @@ pub struct Candidate {
     /// beam (see [`crate::verify::Vicinity::evidence`]); selection,
     /// ambiguity and acceptance compare it with the threshold.
     pub evidence: f32,
-    /// How loosely the scan pins the position: `ln(spread / SPREAD_UNIT)`
-    /// ([`crate::confidence::spread_feature`]) of
+    /// How loosely the scan pins the position: `ln(spread / unit)`
+    /// ([`crate::confidence::spread_feature`], 0.05 m on a 0.05 m map) of
     /// [`crate::refine::position_spread`] (m) at this pose, clamped to
     /// +-[`crate::confidence::SPREAD_MAX`]; the maximum with no pose or a
     /// degenerate fit. A feature of the confidence ([`crate::confidence`]).
@@ -744,7 +744,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
             p.refine.refine_max_dist,
             res * COVARIANCE_FLOOR_CELLS,
         );
-        let spread = confidence::spread_feature(spread);
+        let spread = confidence::spread_feature(spread, res);
         (refined, self.verify_pose(&refined), spread)
     }
 
@@ -833,7 +833,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
             p.refine.refine_max_dist,
             res * COVARIANCE_FLOOR_CELLS,
         );
-        confidence::spread_feature(spread)
+        confidence::spread_feature(spread, res)
     }
 
     /// Stage 3, the fine stage on coarse candidate `c`: SSM against its
