@@ -44,8 +44,9 @@ use crate::verify;
 /// Number of features of the model.
 pub const FEATURES: usize = 5;
 
-/// Bound of the spread feature (`ln` of [`SPREAD_UNIT`]s): a larger
-/// spread, a pose without one, or a degenerate fit, count as this.
+/// Bound of the spread feature (`ln` of the spread in units of
+/// [`spread_unit`]): a larger spread, a pose without one, or a degenerate
+/// fit, count as this.
 pub const SPREAD_MAX: f32 = 3.0;
 
 /// The spread feature's unit (m) on a map of 0.05 m cells, the cell size
