@@ -44,23 +44,8 @@ for m in intel aces csail; do
   # Each scan on the map of the half it is not in.
   { tail -n +$((h + 1)) "$O/$m-h1.jsonl"; head -n "$h" "$O/$m-h2.jsonl"; } > "$O/$m-half.jsonl"
 done
-python3 - "$O" <<'PY'
-import json, math, sys
-o = sys.argv[1]
-def wrap(a): return (a + math.pi) % (2 * math.pi) - math.pi
-print(f"{'set':12} {'scans':>5}  accepted and correct / false accepts (%, given truth; 0.3 m, 5 deg)")
-for m in ("intel", "aces", "csail"):
-    for s in ("self", "half"):
-        rows = [json.loads(l) for l in open(f"{o}/{m}-{s}.jsonl")]
-        ok = bad = 0
-        for r in rows:
-            if not r.get("accepted"):
-                continue
-            t = r["truth"]
-            if math.hypot(r["x"] - t[0], r["y"] - t[1]) < 0.3 and abs(wrap(r["theta"] - t[2])) < math.radians(5):
-                ok += 1
-            else:
-                bad += 1
-        n = len(rows)
-        print(f"{m + '-' + s:12} {n:5}  {100 * ok / n:5.1f} / {100 * bad / n:4.1f}")
-PY
+sets=()
+for m in intel aces csail; do
+  for s in self half; do sets+=("$m-$s=$O/$m-$s.jsonl"); done
+done
+python3 scripts/score-answers.py --truth given "${sets[@]}"
