@@ -92,14 +92,8 @@ pub fn spread_unit(resolution: f32) -> f32 {
 pub fn spread_feature(spread: Option<f32>, resolution: f32) -> f32 {
     match spread {
         Some(s) if s > 0.0 => {
-            // ln(s / unit), written so that a 0.05 m map gives exactly
-            // ln(s / SPREAD_UNIT) (the second term is then ln 1 = 0).
-            let cell = if resolution > 0.0 && resolution.is_finite() {
-                SPREAD_CELL_EXPONENT * libm::logf(resolution / SPREAD_UNIT)
-            } else {
-                0.0
-            };
-            let f = libm::logf(s / SPREAD_UNIT) - cell;
+            // On a 0.05 m map the unit is exactly SPREAD_UNIT (1^x = 1).
+            let f = libm::logf(s / spread_unit(resolution));
             if f.is_finite() {
                 f.clamp(-SPREAD_MAX, SPREAD_MAX)
             } else {
