@@ -48,13 +48,17 @@ struct LogResult {
 /// checks that every answer is well formed (confidence, decision,
 /// hypotheses, covariance). `None` when the shared data is absent.
 fn real_log(name: &str, beams: usize, every: usize) -> Option<LogResult> {
-    real_log_split(name, beams, every, 1)
+    real_log_resampled(name, beams, every, None)
 }
 
-/// [`real_log`] on the map with each cell split into `split x split`
-/// cells (the same map at a finer resolution), or, with `split` 0, with
-/// each 2 x 2 cells merged into one ([`coarser`]).
-fn real_log_split(name: &str, beams: usize, every: usize, split: u32) -> Option<LogResult> {
+/// [`real_log`] on the map's grid resampled by `resample` ([`finer`],
+/// [`coarser`]) before it is compiled.
+fn real_log_resampled(
+    name: &str,
+    beams: usize,
+    every: usize,
+    resample: Option<fn(&OccupancyGrid) -> OccupancyGrid>,
+) -> Option<LogResult> {
     let (Some(map), Some(log), Some(truth)) = (
         mapc::testdata::shared(&format!("maps/{name}/{name}.yaml")),
         mapc::testdata::shared(&format!("logs/{name}/{name}-corrected.log.gz")),
@@ -63,10 +67,8 @@ fn real_log_split(name: &str, beams: usize, every: usize, split: u32) -> Option<
         return None;
     };
     let mut source = mapc::compiler::mapfile::load_yaml(&map).unwrap();
-    if split > 1 {
-        source.grid = finer(&source.grid, split);
-    } else if split == 0 {
-        source.grid = coarser(&source.grid);
+    if let Some(resample) = resample {
+        source.grid = resample(&source.grid);
     }
     let built = common::build(source, 150);
     let db = built.open();
@@ -189,15 +191,15 @@ fn real_log_split(name: &str, beams: usize, every: usize, split: u32) -> Option<
     Some(r)
 }
 
-/// `grid` with each cell split into `k x k` cells of the same state (the
-/// same origin, `resolution / k`).
-fn finer(grid: &OccupancyGrid, k: u32) -> OccupancyGrid {
-    let (w, h) = (grid.width * k, grid.height * k);
+/// `grid` with each cell split into 2 x 2 cells of the same state (the
+/// same origin, half the resolution).
+fn finer(grid: &OccupancyGrid) -> OccupancyGrid {
+    let (w, h) = (grid.width * 2, grid.height * 2);
     let cells = (0..h)
-        .flat_map(|cy| (0..w).map(move |cx| (cx / k, cy / k)))
+        .flat_map(|cy| (0..w).map(move |cx| (cx / 2, cy / 2)))
         .map(|(x, y)| grid.cells[(y * grid.width + x) as usize])
         .collect();
-    OccupancyGrid::from_cells(w, h, grid.resolution / k as f64, grid.origin, cells)
+    OccupancyGrid::from_cells(w, h, grid.resolution / 2.0, grid.origin, cells)
 }
 
 /// `grid` with each 2 x 2 cells merged into one of twice the size
@@ -298,7 +300,7 @@ fn intel_and_aces_logs_do_not_regress() {
 /// 0.0% (60.3% / 0.0% in cells).
 #[test]
 fn a_finer_map_of_the_same_building_gives_the_same_decisions() {
-    let Some(r) = real_log_split("csail", 361, 3, 2) else {
+    let Some(r) = real_log_resampled("csail", 361, 3, Some(finer)) else {
         return;
     };
     assert!(
@@ -321,7 +323,7 @@ fn a_finer_map_of_the_same_building_gives_the_same_decisions() {
 /// set: 59.3% / 4.9% (76.9% / 9.9% in cells).
 #[test]
 fn a_coarser_map_is_not_trusted_more() {
-    let Some(r) = real_log_split("intel", 180, 5, 0) else {
+    let Some(r) = real_log_resampled("intel", 180, 5, Some(coarser)) else {
         return;
     };
     assert!(
