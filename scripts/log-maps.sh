@@ -16,19 +16,9 @@
 # About 2 minutes on 2 cores after the release build.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-S=${SHARED:-../shared}
 O=${1:-build-artifacts/log-maps}
-M=target/release/mapc
-PY=${PYTHON:-python/target/venv/bin/python}
-if [ ! -d "$S/logs" ]; then
-  echo "log-maps.sh: needs the shared logs at $S (set SHARED=...)" >&2
-  exit 2
-fi
-if ! "$PY" -c "import numpy" 2> /dev/null; then
-  echo "log-maps.sh: needs a Python with numpy (run scripts/python-test.sh once, or set PYTHON=...)" >&2
-  exit 2
-fi
-cargo build --release -q -p mapc
+# shellcheck source=scripts/experiment-env.sh
+source scripts/experiment-env.sh log-maps.sh logs
 mkdir -p "$O"
 for m in intel aces csail; do
   L="$S/logs/$m/$m-corrected.log.gz"
