@@ -410,7 +410,7 @@ void refloc_db_close(struct refloc_db *db);
  Localizes one scan given as ranges (`sensor_msgs/LaserScan` layout: beam
  `k` at angle `angle_min + k * angle_increment` in the sensor frame, rad;
  `angle_increment < 0` for clockwise scans; ranges in metres, NaN, inf or
- outside `[range_min, range_max]` meaning "no return"), with no initial
+ outside `[range_min, range_max)` meaning "no return"), with no initial
  pose, using only `scratch[0..scratch_len]` (at least
  `refloc_scratch_size(db, n)` bytes, any alignment). Writes the pose to
  `out_result` (zeroed on error). Never allocates.

@@ -31,7 +31,10 @@ pub const AFFINITY_CAP: usize = 16 * 1024;
 
 /// A laser scan as `sensor_msgs/LaserScan` ranges: beam `k` at angle
 /// `angle_min + k * angle_increment` (radians, sensor frame); ranges in
-/// metres; non-finite or out-of-limits ranges mean "no return".
+/// metres. "No return" is a non-finite range, one below `range_min`, or one
+/// of `range_max` or more: many drivers and simulators (Stage, CARMEN logs)
+/// report a beam that hit nothing as exactly `range_max`, which taken as a
+/// return would draw an arc of false surface at the sensor's reach.
 #[derive(Clone, Copy, Debug)]
 pub struct RangeScan<'a> {
     /// First beam angle (rad).
@@ -40,7 +43,8 @@ pub struct RangeScan<'a> {
     pub angle_increment: f32,
     /// Minimum valid range (m).
     pub range_min: f32,
-    /// Maximum valid range (m).
+    /// Maximum range (m): returns are shorter than this; a range of
+    /// `range_max` or more is "no return".
     pub range_max: f32,
     /// Ranges (m).
     pub ranges: &'a [f32],
@@ -1155,7 +1159,7 @@ fn load_scan(
                 let src = if inc > 0.0 { k } else { n - 1 - k };
                 let a = r.angle_min + src as f32 * inc;
                 let d = r.ranges[src];
-                let ok = d.is_finite() && d >= r.range_min && d <= r.range_max && d > 0.0;
+                let ok = d.is_finite() && d >= r.range_min && d < r.range_max && d > 0.0;
                 if ok {
                     rng[k] = d;
                     pts[k] = [d * libm::cosf(a), d * libm::sinf(a)];

@@ -951,17 +951,42 @@ fn fixture_database_localizes_a_clean_scan() {
     );
 }
 
+/// A beam reported at exactly `range_max` is "no return", as Stage and
+/// CARMEN logs report a beam that hit nothing: the same answer as with NaN
+/// there, not an arc of false surface at the sensor's reach.
+#[test]
+fn a_range_of_range_max_is_no_return() {
+    let buf = tiny_db();
+    let db = RefDb::new(buf.bytes()).unwrap();
+    let (truth, full) = truth_and_scan();
+    let (mut nan, mut at_max) = (full.clone(), full.clone());
+    for k in 40..140 {
+        nan[k] = f32::NAN;
+        at_max[k] = fixture::RANGE_MAX;
+    }
+    let answer = |ranges: &[f32]| {
+        let scan = ranges_scan(ranges);
+        let mut scratch = vec![0u8; scratch_size(db.params(), scan.len())];
+        let l = localize(&db, &scan, &mut scratch).expect("localizes");
+        (l.pose, l.confidence, l.valid_points)
+    };
+    let (a, b) = (answer(&nan), answer(&at_max));
+    assert_eq!(a, b);
+    assert!((a.0.x - truth.x).abs() < 0.15 && (a.0.y - truth.y).abs() < 0.15);
+}
+
 #[test]
 fn localize_rejects_scans_without_enough_returns() {
     let buf = tiny_db();
     let db = RefDb::new(buf.bytes()).unwrap();
     let n = 362;
-    let cases: [(&str, Vec<f32>); 5] = [
+    let cases: [(&str, Vec<f32>); 6] = [
         ("empty", vec![]),
         ("all NaN", vec![f32::NAN; n]),
         ("all +inf", vec![f32::INFINITY; n]),
         ("negative", vec![-1.5; n]),
         ("below range_min", vec![0.01; n]),
+        ("all at range_max", vec![fixture::RANGE_MAX; n]),
     ];
     for (what, ranges) in &cases {
         match run(&db, &ranges_scan(ranges)) {
@@ -1007,23 +1032,22 @@ fn localize_rejects_scans_without_enough_returns() {
 fn localize_survives_a_scan_of_max_range_readings() {
     let buf = tiny_db();
     let db = RefDb::new(buf.bytes()).unwrap();
-    for r in [
-        fixture::RANGE_MAX,
-        fixture::RANGE_MAX * (1.0 - f32::EPSILON),
-    ] {
-        let ranges = vec![r; 362];
-        // Readings at exactly range_max count as returns (a circle of points);
-        // whatever the answer, it is a value or a typed error, not a panic.
-        if let Ok(p) = run(&db, &ranges_scan(&ranges)) {
-            assert!(p.x.is_finite() && p.y.is_finite() && p.theta.is_finite());
-        }
+    // Readings one ulp under range_max count as returns (a circle of
+    // points); whatever the answer, it is a value or a typed error, not a
+    // panic.
+    let ranges = vec![fixture::RANGE_MAX * (1.0 - f32::EPSILON); 362];
+    if let Ok(p) = run(&db, &ranges_scan(&ranges)) {
+        assert!(p.x.is_finite() && p.y.is_finite() && p.theta.is_finite());
     }
-    // Just past range_max: no returns at all.
-    let ranges = vec![fixture::RANGE_MAX * 1.001; 362];
-    assert!(matches!(
-        run(&db, &ranges_scan(&ranges)),
-        Err(LocalizeError::NotEnoughPoints { valid: 0, .. })
-    ));
+    // At range_max (how many drivers report a beam that hit nothing) and
+    // past it: no returns at all.
+    for r in [fixture::RANGE_MAX, fixture::RANGE_MAX * 1.001] {
+        let ranges = vec![r; 362];
+        assert!(matches!(
+            run(&db, &ranges_scan(&ranges)),
+            Err(LocalizeError::NotEnoughPoints { valid: 0, .. })
+        ));
+    }
 }
 
 #[test]

@@ -130,8 +130,8 @@ impl ScanData {
         }
     }
     /// The beams as (bearing in the sensor frame (rad), range (m)) pairs:
-    /// a range outside `[range_min, range_max]` or non-finite (no return)
-    /// becomes infinite; points give their bearing and distance.
+    /// a range outside `[range_min, range_max)` or non-finite (no return,
+    /// as [`refloc::RangeScan`] reads it) becomes infinite; points give their bearing and distance.
     pub fn beams(&self) -> Vec<(f32, f32)> {
         match self {
             ScanData::Ranges {
@@ -144,7 +144,7 @@ impl ScanData {
                 .iter()
                 .enumerate()
                 .map(|(i, &r)| {
-                    let ok = r.is_finite() && r >= *range_min && r <= *range_max;
+                    let ok = r.is_finite() && r >= *range_min && r < *range_max;
                     (
                         angle_min + i as f32 * angle_increment,
                         if ok { r } else { f32::INFINITY },
