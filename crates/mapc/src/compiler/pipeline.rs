@@ -57,7 +57,8 @@ pub struct BuildConfig {
     pub tentative_k: u32,
     /// Most resampled points per scan.
     pub max_points: u32,
-    /// Early-stop ratio of the candidate loop (0: examine all).
+    /// Early-stop ratio of the candidate loop (0: examine every candidate;
+    /// the confidence stops of `refloc::select` are off too).
     pub early_accept: f32,
     /// Widths (degrees) of the window histograms stored for partial fields
     /// of view, at most two, ascending; empty stores none.
