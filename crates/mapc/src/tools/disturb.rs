@@ -17,7 +17,9 @@ use crate::compiler::sim::{beam_range as beam, Lidar};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Class {
-    /// 1-10 people (discs of radius 0.2-0.3 m) within 0.6-6 m of the sensor.
+    /// 1-10 people (discs of radius 0.2-0.3 m) standing in the free space
+    /// within 0.6-6 m of the sensor (a disc that would overlap an obstacle
+    /// is drawn again, up to [`PLACE_TRIES`] times, else left out).
     People,
     /// 1-4 boxes (sides 0.4-1.2 m, any orientation) in the free space
     /// within 1-6 m: furniture the map lacks.
@@ -94,6 +96,9 @@ impl Class {
 /// Largest position (m) and heading (rad, 2 degrees) error of the sensor
 /// mount for [`Class::MountError`], each uniform in +- this.
 pub const MOUNT_ERROR: [f32; 2] = [0.05, 2.0 * std::f32::consts::PI / 180.0];
+
+/// Draws of a person's position before it is left out ([`Class::People`]).
+pub const PLACE_TRIES: usize = 20;
 
 /// Sweep time of a scan for [`Class::MotionDistortion`] (s).
 pub const SWEEP_S: f32 = 0.1;
@@ -178,14 +183,37 @@ impl Scene<'_, '_> {
         ranges
     }
 
+    /// True when a disc of radius `r` (m) centred at `c` (map frame) lies
+    /// in free cells of the map: its centre and 8 points of its rim.
+    fn disc_is_free(&self, c: [f32; 2], r: f32) -> bool {
+        use refloc::raycast::Occupancy;
+        (0..9).all(|k| {
+            let (dx, dy) = if k == 8 {
+                (0.0, 0.0)
+            } else {
+                let a = k as f32 * std::f32::consts::FRAC_PI_4;
+                (r * a.cos(), r * a.sin())
+            };
+            let uv = self.frame.to_cells([c[0] + dx, c[1] + dy]);
+            uv[0] >= 0.0
+                && uv[1] >= 0.0
+                && (uv[0] as u32) < self.grid.width()
+                && (uv[1] as u32) < self.grid.height()
+                && !self.grid.blocked(uv[0] as u32, uv[1] as u32)
+        })
+    }
+
     /// [`Class::People`].
     fn people(&self, rng: &mut Rng) -> Vec<f32> {
         let n = 1 + rng.below(10) as usize;
         let discs: Vec<([f32; 2], f32)> = (0..n)
-            .map(|_| {
-                let (d, a) = (rng.range(0.6, 6.0) as f32, rng.range(-3.15, 3.15) as f32);
+            .filter_map(|_| {
                 let r = rng.range(0.2, 0.3) as f32;
-                (self.around(d, a), r)
+                (0..PLACE_TRIES).find_map(|_| {
+                    let (d, a) = (rng.range(0.6, 6.0) as f32, rng.range(-3.15, 3.15) as f32);
+                    let c = self.around(d, a);
+                    self.disc_is_free(c, r).then_some((c, r))
+                })
             })
             .collect();
         let discs = &discs;
@@ -680,6 +708,35 @@ mod tests {
             longer > 0 && shorter > 0,
             "longer {longer} shorter {shorter}"
         );
+    }
+
+    /// People stand in the free space: a disc across or inside a wall is
+    /// not free; people only ever shorten beams, and over many seeds they
+    /// shorten many.
+    #[test]
+    fn people_stand_in_free_space() {
+        let (w, h, words) = two_rooms();
+        let grid = BitGrid::new(w, h, &words).unwrap();
+        let lidar = Lidar::new(720, std::f32::consts::TAU, 30.0);
+        let sensor = Pose2::new(6.3, 2.0, 0.0);
+        let scene = Scene {
+            grid: &grid,
+            frame: &FRAME,
+            sensor: &sensor,
+            lidar: &lidar,
+        };
+        let clean = crate::compiler::sim::virtual_scan(&grid, &FRAME, &sensor, &lidar);
+        let mut shortened = 0;
+        for seed in 0..40 {
+            let a = scene.people(&mut Rng::new(seed));
+            assert!(a.iter().zip(&clean).all(|(x, c)| x <= c), "seed {seed}");
+            shortened += a.iter().zip(&clean).filter(|(x, c)| x < c).count();
+        }
+        assert!(shortened > 40 * 20, "{shortened}");
+        // A disc across the wall, or centred in it, is not free.
+        assert!(!scene.disc_is_free([7.0, 2.0], 0.25));
+        assert!(!scene.disc_is_free([6.8, 2.0], 0.25));
+        assert!(scene.disc_is_free([6.5, 2.0], 0.25));
     }
 
     #[test]
