@@ -50,6 +50,13 @@ pub struct RangeScan<'a> {
     pub ranges: &'a [f32],
 }
 
+/// True when range `d` (m) is a return under [`RangeScan`]'s rule: finite,
+/// at least `range_min` and under `range_max` (m).
+#[inline]
+pub fn is_return(d: f32, range_min: f32, range_max: f32) -> bool {
+    d.is_finite() && d >= range_min && d < range_max
+}
+
 /// An input scan.
 #[derive(Clone, Copy, Debug)]
 pub enum Scan<'a> {
@@ -1159,7 +1166,7 @@ fn load_scan(
                 let src = if inc > 0.0 { k } else { n - 1 - k };
                 let a = r.angle_min + src as f32 * inc;
                 let d = r.ranges[src];
-                let ok = d.is_finite() && d >= r.range_min && d < r.range_max && d > 0.0;
+                let ok = is_return(d, r.range_min, r.range_max) && d > 0.0;
                 if ok {
                     rng[k] = d;
                     pts[k] = [d * libm::cosf(a), d * libm::sinf(a)];

@@ -187,6 +187,7 @@ impl Scene<'_, '_> {
     /// in free cells of the map: its centre and 8 points of its rim.
     fn disc_is_free(&self, c: [f32; 2], r: f32) -> bool {
         use refloc::raycast::Occupancy;
+        let (w, h) = (self.grid.width(), self.grid.height());
         (0..9).all(|k| {
             let (dx, dy) = if k == 8 {
                 (0.0, 0.0)
@@ -194,12 +195,8 @@ impl Scene<'_, '_> {
                 let a = k as f32 * std::f32::consts::FRAC_PI_4;
                 (r * a.cos(), r * a.sin())
             };
-            let uv = self.frame.to_cells([c[0] + dx, c[1] + dy]);
-            uv[0] >= 0.0
-                && uv[1] >= 0.0
-                && (uv[0] as u32) < self.grid.width()
-                && (uv[1] as u32) < self.grid.height()
-                && !self.grid.blocked(uv[0] as u32, uv[1] as u32)
+            cell_at(w, h, self.frame, [c[0] + dx, c[1] + dy])
+                .is_some_and(|(x, y)| !self.grid.blocked(x, y))
         })
     }
 
@@ -422,6 +419,14 @@ const DOOR_WALL: f32 = 0.25;
 /// Nearest a closed door comes to the sensor (m).
 const DOOR_CLEARANCE: f32 = 0.4;
 
+/// The cell under world point `p` of a `w` x `h` grid placed by `frame`,
+/// if inside it.
+fn cell_at(w: u32, h: u32, frame: &MapFrame, p: [f32; 2]) -> Option<(u32, u32)> {
+    let c = frame.to_cells(p);
+    let (x, y) = (c[0].floor(), c[1].floor());
+    (x >= 0.0 && y >= 0.0 && x < w as f32 && y < h as f32).then_some((x as u32, y as u32))
+}
+
 /// An editable copy of an occupancy bit grid (row-major bits, 32 a word).
 struct Cells {
     w: u32,
@@ -440,10 +445,7 @@ impl Cells {
 
     /// The cell under world point `p`, if inside the grid.
     fn cell(&self, frame: &MapFrame, p: [f32; 2]) -> Option<(u32, u32)> {
-        let c = frame.to_cells(p);
-        let (x, y) = (c[0].floor(), c[1].floor());
-        (x >= 0.0 && y >= 0.0 && x < self.w as f32 && y < self.h as f32)
-            .then_some((x as u32, y as u32))
+        cell_at(self.w, self.h, frame, p)
     }
 
     fn blocked(&self, x: u32, y: u32) -> bool {

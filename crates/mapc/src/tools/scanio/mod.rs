@@ -144,7 +144,7 @@ impl ScanData {
                 .iter()
                 .enumerate()
                 .map(|(i, &r)| {
-                    let ok = r.is_finite() && r >= *range_min && r < *range_max;
+                    let ok = refloc::localize::is_return(r, *range_min, *range_max);
                     (
                         angle_min + i as f32 * angle_increment,
                         if ok { r } else { f32::INFINITY },
