@@ -231,7 +231,7 @@ fn localize_a_batch_of_json_lines() {
     // One malformed line in the middle: reported, the batch goes on.
     lines.push_str("{\"id\": \"bad\", \"angle_min\": \"x\"}\n");
     let input = dir.path().join("scans.jsonl");
-    std::fs::write(&input, lines).unwrap();
+    std::fs::write(&input, &lines).unwrap();
     let o = mapc(
         &["localize", dbp.to_str().unwrap(), input.to_str().unwrap()],
         dir.path(),
@@ -272,6 +272,27 @@ fn localize_a_batch_of_json_lines() {
         .as_str()
         .unwrap()
         .contains("angle_min"));
+    assert!(!text(&o).contains("--range-max"), "{}", text(&o));
+    // A sensor of much shorter reach than the reference scans': the
+    // summary says so and how to build for it.
+    let first: serde_json::Value = serde_json::from_str(lines.lines().next().unwrap()).unwrap();
+    let mut short = first.clone();
+    short["range_max"] = serde_json::json!(4.0);
+    let short_input = dir.path().join("short.jsonl");
+    std::fs::write(&short_input, format!("{short}\n")).unwrap();
+    let o = mapc(
+        &[
+            "localize",
+            dbp.to_str().unwrap(),
+            short_input.to_str().unwrap(),
+        ],
+        dir.path(),
+    );
+    assert!(
+        text(&o).contains("mapc build --range-max 4.0"),
+        "{}",
+        text(&o)
+    );
     // Text output and stdin.
     let o = Command::new(env!("CARGO_BIN_EXE_mapc"))
         .args(["localize", dbp.to_str().unwrap(), "-", "--format", "text"])

@@ -314,7 +314,8 @@ impl Dims {
             ref_beams: params.sensor.beams as usize,
             points,
             hist: params.coarse.hist_cells().max(params.coarse.win_cells()),
-            cands: params.coarse.nc_max as usize,
+            // The first ranking's candidates, then the background pass's.
+            cands: 2 * params.coarse.nc_max as usize,
             tent: points * params.ssm.tentative_k as usize,
             aff: params.ssm.affinity_cap as usize,
         }
@@ -475,6 +476,21 @@ pub const SKEW_COST_RATIO: f32 = 0.5;
 /// The least number of resampled query points the fine stage works with.
 pub const MIN_PREPARED_POINTS: usize = 8;
 
+/// A scan whose sensor reaches less than this share of the database's
+/// reference sensor range (`mapc build --range-max`, 30 m by default) gets
+/// an exhaustive search ([`Localizer::short_reach`]). Not fitted: half is
+/// a round line between the real logs' sensors (30-80 m against 30 m
+/// references, never affected) and short-range sensors (4-12 m), for which
+/// a database built at their own range is better still (docs/robot.md,
+/// "Sensor reach"; docs/results.md, "A sensor of short reach").
+pub const SHORT_REACH: f32 = 0.5;
+
+/// Most candidates the background pass ([`Localizer::rank_background`])
+/// adds to a rejected scan's search. It runs only for scans whose first
+/// answer is rejected, which have usually examined every one of the first
+/// N_C candidates; this bounds what they cost on top (docs/performance.md).
+pub const BACKGROUND_MAX: usize = 16;
+
 /// What [`Localizer::prepare`] found in the scan.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Prepared {
@@ -497,7 +513,10 @@ pub struct Prepared {
 /// scan, [`Localizer::rank`] runs the coarse stage, [`Localizer::examine`]
 /// runs the fine stage on one candidate, and [`Localizer::select`] gives the
 /// answer. [`localize`] is those calls in order, with the candidate search
-/// of [`crate::select::Search`]; each stage can also be called (and
+/// of [`crate::select::Search`] (exhaustive for a sensor of short reach,
+/// [`Localizer::short_reach`]) and, when the answer would be rejected, a
+/// second ranking and search over the sites it adds
+/// ([`Localizer::rank_background`]); each stage can also be called (and
 /// measured) on its own.
 pub struct Localizer<'d, 's, D: AsRef<[u8]>> {
     db: &'d RefDb<D>,
@@ -629,11 +648,12 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     pub fn rank_sites(&mut self) -> usize {
         let p = self.params;
         let b = &mut self.b;
+        let room = (p.coarse.nc_max as usize).min(b.top.len());
         self.ranked = coarse::rank_sites_where(
             self.db,
             &b.hist[..self.cells],
             self.window,
-            b.top,
+            &mut b.top[..room],
             self.prior.as_ref(),
         );
         self.nc = coarse::candidate_count(
@@ -652,8 +672,101 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         self.rank_sites()
     }
 
+    /// The background pass, stage 2 again for a scan whose answer after the
+    /// first `examined` candidates would be rejected: the sites ranked by the
+    /// histogram of the scan without its foreground surfaces
+    /// ([`coarse::query_histogram_with`], [`coarse::FOREGROUND_WIDTH`]),
+    /// the N_C rule applied to them, and those not among the first
+    /// `examined` candidates appended after them (at most
+    /// [`BACKGROUND_MAX`]). People, boxes and chairs standing in the open
+    /// hide the walls behind them and add surfaces no site has, and the
+    /// right site can fall out of the first ranking's candidates; without
+    /// them it often ranks high again. Pillars and furniture the map has
+    /// are foreground too, which is why this is a second chance and not
+    /// the ranking (docs/results.md, "A second ranking without the
+    /// foreground"). The background histogram replaces the first one in the
+    /// scratch. Returns the new N_C (`examined` when nothing is added).
+    pub fn rank_background(&mut self, examined: usize) -> usize {
+        let p = self.params;
+        let kept = examined.min(self.nc);
+        let b = &mut self.b;
+        let s = &self.scan;
+        let (window, cells) = coarse::query_histogram_with(
+            &b.in_pts[..s.beams],
+            s.fov,
+            s.wrap,
+            coarse::FOREGROUND_WIDTH,
+            p,
+            b.r_pts,
+            b.r_tan,
+            b.hist,
+        );
+        self.window = window;
+        self.cells = cells;
+        let (first, rest) = b.top.split_at_mut(kept);
+        let room = rest.len().min(p.coarse.nc_max as usize);
+        let ranked = coarse::rank_sites_where(
+            self.db,
+            &b.hist[..cells],
+            window,
+            &mut rest[..room],
+            self.prior.as_ref(),
+        );
+        let nc = coarse::candidate_count(
+            &rest[..ranked],
+            p.coarse.nc_min as usize,
+            p.coarse.nc_max as usize,
+            p.coarse.nc_margin,
+        );
+        let mut added = 0;
+        for j in 0..nc {
+            let r = rest[j];
+            if added == BACKGROUND_MAX {
+                break;
+            }
+            if first.iter().any(|f| f.site == r.site) {
+                continue;
+            }
+            rest[added] = r;
+            added += 1;
+        }
+        self.nc = kept + added;
+        self.nc
+    }
+
+    /// True when the prepared scan's sensor reaches less than
+    /// [`SHORT_REACH`] of the reference sensor's range: its scans see much
+    /// less of the building than the sites' reference scans, the coarse
+    /// stage compares unlike histograms, and a look-alike place often
+    /// explains the little the scan sees as well as the right one. The
+    /// localizer then examines every candidate (no early stop), so the
+    /// ambiguity test sees the look-alikes.
+    pub fn short_reach(&self) -> bool {
+        self.scan.range_max < SHORT_REACH * self.params.sensor.range_max
+    }
+
+    /// True when the answer among the first `examined` candidates, the best
+    /// `search` found, would be accepted: the decision [`Localizer::select`]
+    /// makes, before the answer's skew is fitted.
+    pub fn answer_accepted(&self, search: &Search, examined: usize) -> bool {
+        let nc = examined.min(self.nc);
+        let Some(best) = search.best().filter(|&b| b < nc) else {
+            return false;
+        };
+        let cands = &self.b.cands[..nc];
+        let c = &cands[best];
+        match self.db.decision() {
+            Some(m) => select::accepted_with(c, search.confidence(cands, best), &m),
+            None => select::accepted(
+                c,
+                select::ambiguous(cands, c, self.params.select.ambiguity_ratio),
+            ),
+        }
+    }
+
     /// The coarse candidates, best first (N_C of them after
-    /// [`Localizer::rank`]).
+    /// [`Localizer::rank`]; then those [`Localizer::rank_background`]
+    /// appended).
     pub fn ranked(&self) -> &[Ranked] {
         &self.b.top[..self.nc]
     }
@@ -1102,15 +1215,33 @@ pub fn localize_with_prior<'s, D: AsRef<[u8]>>(
     let nc = loc.rank();
     let decision = db.decision().unwrap_or(Decision::DEFAULT);
     let mut search = Search::new(db.params()).with_decision(decision);
-    let mut examined = nc;
-    for c in 0..nc {
+    if loc.short_reach() {
+        search = search.exhaustive();
+    }
+    let mut examined = search_candidates(&mut loc, &mut search, 0, nc);
+    if !loc.answer_accepted(&search, examined) {
+        // A second chance for a scan with things in front of the walls.
+        let total = loc.rank_background(examined);
+        search.search_on();
+        examined = search_candidates(&mut loc, &mut search, examined, total);
+    }
+    loc.select(&search, examined)
+}
+
+/// The fine stage over candidates `from..to` with `search` deciding which
+/// to examine; returns how many candidates, counted from 0, were examined
+/// or skipped before it stopped (`to` when it did not).
+fn search_candidates<D: AsRef<[u8]>>(
+    loc: &mut Localizer<'_, '_, D>,
+    search: &mut Search,
+    from: usize,
+    to: usize,
+) -> usize {
+    for c in from..to {
         let r = loc.ranked()[c];
-        let site_xy = db.site_xy(r.site as usize);
+        let site_xy = loc.db.site_xy(r.site as usize);
         match search.next(r.gamma, site_xy, loc.candidates(c)) {
-            Next::Stop => {
-                examined = c;
-                break;
-            }
+            Next::Stop => return c,
             Next::Skip => loc.skip(c),
             Next::Examine => {
                 if loc.examine(c).is_some_and(|e| e.has_pose != 0) {
@@ -1119,7 +1250,7 @@ pub fn localize_with_prior<'s, D: AsRef<[u8]>>(
             }
         }
     }
-    loc.select(&search, examined)
+    to
 }
 
 /// Fills dense points and ranges in counter-clockwise order.

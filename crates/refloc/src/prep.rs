@@ -46,6 +46,24 @@ pub fn prepare(
     out_pts: &mut [[f32; 2]],
     out_tan: &mut [[f32; 2]],
 ) -> usize {
+    prepare_with(dense, wrap, params, 0.0, out_pts, out_tan)
+}
+
+/// As [`prepare`], leaving out every *foreground surface* at most
+/// `foreground` metres across (0: none): a surface (a run of linked beams
+/// between depth jumps) whose end points are at most that far apart and
+/// whose neighbouring beams on both sides reach farther or return nothing.
+/// A person or a box standing in the open is one; so is a pillar. At the
+/// edge of a partial field of view the side beyond is unknown, and a
+/// surface there is kept.
+pub fn prepare_with(
+    dense: &[[f32; 2]],
+    wrap: bool,
+    params: &Params,
+    foreground: f32,
+    out_pts: &mut [[f32; 2]],
+    out_tan: &mut [[f32; 2]],
+) -> usize {
     let n = dense.len();
     let cap = out_pts
         .len()
@@ -100,15 +118,46 @@ pub fn prepare(
 
     let mut count = 0;
     let mut last: Option<[f32; 2]> = None;
+    let mut skip = 0usize;
     for s in 0..n {
         let i = (start + s) % n;
         let p = dense[i];
+        if skip > 0 {
+            skip -= 1;
+            continue;
+        }
         if !p[0].is_finite() {
             last = None;
             continue;
         }
         let has_prev = linked(i, prev(i));
         let has_next = linked(i, next(i));
+        if foreground > 0.0 && !has_prev && has_next {
+            // The start of a surface: find its end.
+            let mut b = i;
+            let mut len = 0usize;
+            while len < n {
+                match next(b) {
+                    Some(j) if linked(b, Some(j)) && j != i => {
+                        b = j;
+                        len += 1;
+                    }
+                    _ => break,
+                }
+            }
+            let farther = |side: Option<usize>, end: usize| match side {
+                Some(k) => !dense[k][0].is_finite() || norm(dense[k]) > norm(dense[end]),
+                None => false,
+            };
+            if dist2(p, dense[b]) <= foreground * foreground
+                && farther(prev(i), i)
+                && farther(next(b), b)
+            {
+                skip = len;
+                last = None;
+                continue;
+            }
+        }
         if !has_prev && !has_next {
             // Isolated return: an outlier or a thin object; no tangent either.
             last = None;

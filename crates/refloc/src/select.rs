@@ -258,6 +258,16 @@ impl Search {
         }
     }
 
+    /// The same search with no early stop of any kind: every candidate is
+    /// examined (as with `early_accept` 0).
+    pub fn exhaustive(self) -> Search {
+        Search {
+            early_accept: 0.0,
+            early_min: 0,
+            ..self
+        }
+    }
+
     /// The confidence (0..=1) of candidate `b` as the answer among `cands`
     /// under the search's model: its probability, capped when another
     /// distinct pose makes it ambiguous. 0 without a model.
@@ -278,6 +288,15 @@ impl Search {
             (Some(d), Some(c)) => !accepted_with(c, self.confidence(cands, b), &d),
             _ => false,
         }
+    }
+
+    /// Goes on with a second list of candidates (the localizer's background
+    /// pass) after the first ended: the best answer so far stays, the early
+    /// stop starts afresh (a stop of the first list, and its coarse-score
+    /// floor, say nothing about the second's scores).
+    pub fn search_on(&mut self) {
+        self.floor = None;
+        self.confirmed = 0;
     }
 
     /// The index of the best candidate recorded so far.
@@ -857,6 +876,39 @@ mod tests {
         let mut s = Search::new(&p);
         s.record(&[cand(0.0, 0.0, 0.0, 90.0, 0)], 0.9);
         assert!(!s.stopping());
+    }
+
+    #[test]
+    fn an_exhaustive_search_never_stops_and_search_on_starts_afresh() {
+        // The confident match of `a_confident_match_stops_after_confirming_near_rivals`
+        // and agreeing matches that reach the confidence stop: an exhaustive
+        // search (a short-reach scan) examines on.
+        let p = params();
+        let mut s = Search::new(&p)
+            .with_decision(Decision::DEFAULT)
+            .exhaustive();
+        let mut cands = vec![];
+        for k in 0..EARLY_CONFIDENCE_MIN + 25 {
+            let g = 0.9 - 0.001 * k as f32;
+            assert_eq!(s.next(g, [10.0 * k as f32, 0.0], &cands), Next::Examine);
+            cands.push(cand(0.0, 0.0, 0.0, 85.5, 1));
+            s.record(&cands, g);
+            assert!(!s.stopping(), "stopped at {k}");
+        }
+        assert_eq!(s.best(), Some(0));
+        // A stopping search, told to search on (the background pass):
+        // examines again, keeps its best answer.
+        let mut s = Search::new(&p);
+        let mut cands = vec![cand(0.0, 0.0, 0.0, 85.5, 1)];
+        s.record(&cands, 0.9);
+        assert!(s.stopping());
+        assert_eq!(s.next(0.5, [10.0, 0.0], &cands), Next::Stop);
+        s.search_on();
+        assert!(!s.stopping());
+        assert_eq!(s.next(0.5, [10.0, 0.0], &cands), Next::Examine);
+        cands.push(cand(20.0, 0.0, 0.0, 60.0, 0));
+        s.record(&cands, 0.5);
+        assert_eq!(s.best(), Some(0));
     }
 
     #[test]

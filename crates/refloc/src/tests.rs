@@ -1533,3 +1533,234 @@ fn params_record_round_trips_every_field() {
     let d = Params::defaults(362, 30.0);
     assert_eq!(Params::from_record(&d.to_record()), Ok(d));
 }
+
+// ---------------------------------------------------------------------------
+// Foreground surfaces and the background pass
+// ---------------------------------------------------------------------------
+
+/// A closed room of radius `wall` m around the sensor (`n` beams over the
+/// full turn), with the beams `from..to` stopped at `near` m by something
+/// standing in front of the wall.
+fn room_with_blocker(n: usize, wall: f32, near: f32, from: usize, to: usize) -> Vec<[f32; 2]> {
+    (0..n)
+        .map(|k| {
+            let a = -PI + k as f32 * 2.0 * PI / n as f32;
+            let r = if (from..to).contains(&k) { near } else { wall };
+            [r * a.cos(), r * a.sin()]
+        })
+        .collect()
+}
+
+fn prepared_ranges(dense: &[[f32; 2]], wrap: bool, foreground: f32) -> Vec<f32> {
+    let p = fixture::params();
+    let m = p.prep.max_points as usize;
+    let (mut pts, mut tan) = (vec![[0f32; 2]; m], vec![[0f32; 2]; m]);
+    let n = prep::prepare_with(dense, wrap, &p, foreground, &mut pts, &mut tan);
+    pts[..n].iter().map(|q| q[0].hypot(q[1])).collect()
+}
+
+#[test]
+fn foreground_surfaces_are_left_out_and_walls_kept() {
+    // A person 1 m away (0.3 m across) in front of a wall 4 m away.
+    let person = room_with_blocker(360, 4.0, 1.0, 100, 117);
+    let all = prepared_ranges(&person, true, 0.0);
+    let bg = prepared_ranges(&person, true, 1.0);
+    assert!(all.iter().any(|&r| r < 1.5), "the person is prepared");
+    assert!(
+        bg.iter().all(|&r| r > 3.9),
+        "the person is left out: {bg:?}"
+    );
+    // The wall is kept whole: the points lost are the person's only.
+    let walls = |v: &[f32]| v.iter().filter(|&&r| r > 3.9).count();
+    assert!(
+        walls(&bg) + 1 >= walls(&all),
+        "{} vs {}",
+        walls(&bg),
+        walls(&all)
+    );
+    // 0 leaves everything in: `prepare` itself.
+    let p = fixture::params();
+    let m = p.prep.max_points as usize;
+    let (mut pts, mut tan) = (vec![[0f32; 2]; m], vec![[0f32; 2]; m]);
+    assert_eq!(
+        prep::prepare(&person, true, &p, &mut pts, &mut tan),
+        all.len()
+    );
+    // Wider than the limit (1.3 m across): kept.
+    let wide = room_with_blocker(360, 4.0, 1.0, 100, 176);
+    assert!(prepared_ranges(&wide, true, 1.0).iter().any(|&r| r < 1.5));
+    // A recess (the neighbours are nearer, not farther): kept.
+    let recess = room_with_blocker(360, 1.0, 4.0, 100, 104);
+    assert!(prepared_ranges(&recess, true, 1.0).iter().any(|&r| r > 3.9));
+    // At the edge of a partial view the far side is unknown: kept.
+    let edge: Vec<[f32; 2]> = person[100..200].to_vec();
+    assert!(prepared_ranges(&edge, false, 1.0).iter().any(|&r| r < 1.5));
+    // The same person in the middle of a partial view: left out.
+    let middle: Vec<[f32; 2]> = person[60..200].to_vec();
+    assert!(prepared_ranges(&middle, false, 1.0)
+        .iter()
+        .all(|&r| r > 3.9));
+}
+
+/// The tiny database ranking `nc` candidates at a time (N_C = `nc`).
+fn fixed_candidates_db(nc: u32) -> Aligned {
+    use crate::format::SectionKind;
+    use zerocopy::IntoBytes;
+    let mut p = fixture::params();
+    p.coarse.nc_min = nc;
+    p.coarse.nc_max = nc;
+    let sections: Vec<_> = fixture::sections()
+        .into_iter()
+        .map(|(k, b)| match k {
+            SectionKind::Params => (k, p.to_record().as_bytes().to_vec()),
+            _ => (k, b),
+        })
+        .collect();
+    Aligned::new(&fixture::encode(&sections))
+}
+
+/// The sites the background pass should add after `first`: the N_C best
+/// by the histogram without foreground (scored site by site here), less
+/// those in `first`, in rank order.
+fn expected_background(db: &RefDb<&[u8]>, ranges: &[f32], first: &[u32]) -> Vec<u32> {
+    let p = db.params();
+    let n = ranges.len();
+    let inc = 2.0 * PI / n as f32;
+    let dense: Vec<[f32; 2]> = ranges
+        .iter()
+        .enumerate()
+        .map(|(k, &r)| {
+            let a = -PI + k as f32 * inc;
+            [r * a.cos(), r * a.sin()]
+        })
+        .collect();
+    let m = p.prep.max_points as usize;
+    let (mut pts, mut tan) = (vec![[0f32; 2]; m], vec![[0f32; 2]; m]);
+    let mut h = vec![0f32; p.coarse.hist_cells().max(p.coarse.win_cells())];
+    let (window, cells) = coarse::query_histogram_with(
+        &dense,
+        2.0 * PI,
+        true,
+        coarse::FOREGROUND_WIDTH,
+        p,
+        &mut pts,
+        &mut tan,
+        &mut h,
+    );
+    let mut scored: Vec<(u32, f32)> = (0..db.site_count())
+        .map(|s| (s as u32, coarse::site_score(db, &h[..cells], window, s)))
+        .collect();
+    scored.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    scored
+        .iter()
+        .take(p.coarse.nc_max as usize)
+        .map(|s| s.0)
+        .filter(|s| !first.contains(s))
+        .collect()
+}
+
+#[test]
+fn only_a_rejected_answer_gets_the_background_pass_and_it_adds_new_sites() {
+    let buf = fixed_candidates_db(1);
+    let db = RefDb::new(buf.bytes()).expect("valid");
+    // A clean scan: accepted from the first ranking's one candidate.
+    let (truth, ranges) = truth_and_scan();
+    let mut scratch = vec![0u8; scratch_size(db.params(), ranges.len())];
+    let l = localize(&db, &ranges_scan(&ranges), &mut scratch).expect("localizes");
+    assert!(l.accepted);
+    assert_eq!(
+        l.candidates.len(),
+        1,
+        "no background pass for an accepted answer"
+    );
+    assert!((l.pose.x - truth.x).abs() < 0.15 && (l.pose.y - truth.y).abs() < 0.15);
+
+    // Scans whose first answer is rejected: nonsense, and the clean scan
+    // with a person in front of the sensor hiding a sixth of it. The
+    // background pass appends exactly the sites its own ranking gives that
+    // the first did not.
+    let buf = fixed_candidates_db(2);
+    let db = RefDb::new(buf.bytes()).expect("valid");
+    let mut rng = fixture::Prng::new(11);
+    let junk: Vec<f32> = (0..362).map(|_| rng.range(0.5, 3.0)).collect();
+    let mut person = ranges.clone();
+    for r in &mut person[150..210] {
+        *r = 0.4;
+    }
+    let (mut added, mut rejected) = (0, 0);
+    for scan in [&junk, &person] {
+        let mut scratch = vec![0u8; scratch_size(db.params(), scan.len())];
+        let mut loc = crate::Localizer::new(&db, &mut scratch, scan.len()).unwrap();
+        loc.prepare(&ranges_scan(scan)).unwrap();
+        let nc = loc.rank();
+        assert_eq!(nc, 2);
+        let model = db.decision().expect("the fixture has a model");
+        let mut search = crate::select::Search::new(db.params()).with_decision(model);
+        for c in 0..nc {
+            if loc.examine(c).is_some_and(|e| e.has_pose != 0) {
+                search.record(loc.candidates(c + 1), loc.ranked()[c].gamma);
+            }
+        }
+        let first: Vec<u32> = loc.ranked()[..nc].iter().map(|r| r.site).collect();
+        if loc.answer_accepted(&search, nc) {
+            continue;
+        }
+        rejected += 1;
+        let total = loc.rank_background(nc);
+        let new: Vec<u32> = loc.ranked()[nc..total].iter().map(|r| r.site).collect();
+        assert_eq!(new, expected_background(&db, scan, &first));
+        assert_eq!(
+            &loc.ranked()[..nc]
+                .iter()
+                .map(|r| r.site)
+                .collect::<Vec<_>>(),
+            &first
+        );
+        added += new.len();
+    }
+    assert!(
+        rejected > 0 && added > 0,
+        "{rejected} rejected, {added} added"
+    );
+}
+
+#[test]
+fn a_short_reach_scan_examines_every_candidate() {
+    let buf = tiny_db();
+    let db = RefDb::new(buf.bytes()).unwrap();
+    let (truth, ranges) = truth_and_scan();
+    let run_with = |range_max: f32| {
+        let scan = Scan::Ranges(RangeScan {
+            range_max,
+            ..match ranges_scan(&ranges) {
+                Scan::Ranges(r) => r,
+                _ => unreachable!(),
+            }
+        });
+        let mut scratch = vec![0u8; scratch_size(db.params(), ranges.len())];
+        let mut loc = crate::Localizer::new(&db, &mut scratch, ranges.len()).unwrap();
+        loc.prepare(&scan).unwrap();
+        let short = loc.short_reach();
+        let mut scratch = vec![0u8; scratch_size(db.params(), ranges.len())];
+        let l = localize(&db, &scan, &mut scratch).unwrap();
+        (
+            short,
+            l.pose,
+            l.candidates.iter().filter(|c| c.has_pose != 0).count(),
+        )
+    };
+    // The room is at most 7.2 m across: every wall is within both reaches.
+    let (short, pose, posed) = run_with(fixture::RANGE_MAX);
+    assert!(!short);
+    assert!(
+        posed < db.site_count(),
+        "the full reach stops early: {posed}"
+    );
+    assert!((pose.x - truth.x).abs() < 0.15 && (pose.y - truth.y).abs() < 0.15);
+    let reach = crate::localize::SHORT_REACH * fixture::RANGE_MAX - 0.1;
+    let (short, pose, posed) = run_with(reach);
+    assert!(short);
+    assert!((pose.x - truth.x).abs() < 0.15 && (pose.y - truth.y).abs() < 0.15);
+    // Every site (three) was matched: nothing stopped the search.
+    assert_eq!(posed, db.site_count());
+}

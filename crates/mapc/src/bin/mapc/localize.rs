@@ -596,6 +596,20 @@ impl Session {
             rec.record(db, k, scan, &r)?;
         }
         self.tally.times.push(time_us as f64);
+        let reach = match &scan.data {
+            ScanData::Ranges { range_max, .. } | ScanData::Points { range_max, .. } => *range_max,
+        };
+        let reference = db.params().sensor.range_max;
+        if reach < refloc::localize::SHORT_REACH * reference {
+            let t = &mut self.tally;
+            t.shortest_reach = if t.short_reach == 0 {
+                reach
+            } else {
+                t.shortest_reach.min(reach)
+            };
+            t.short_reach += 1;
+            t.reference_reach = reference;
+        }
         let judged = map.judge(k, scan);
         Ok(match r {
             Ok(l) => {
@@ -852,6 +866,12 @@ struct Tally {
     errs: Vec<f64>,
     /// Localization times (µs).
     times: Vec<f64>,
+    /// Scans whose sensor reaches less than `refloc::localize::SHORT_REACH`
+    /// of the reference range, and the shortest reach among them (m).
+    short_reach: usize,
+    shortest_reach: f32,
+    /// The database's reference range (m).
+    reference_reach: f32,
 }
 
 impl Tally {
@@ -910,6 +930,15 @@ impl Tally {
             self.accepted,
             med_t / 1000.0
         );
+        if self.short_reach > 0 {
+            eprintln!(
+                "note: {} scans come from a sensor that reaches {:.1} m or less, under half the {:.1} m of the database's reference scans: every candidate is examined for them (slower), and a database built for that sensor answers them better: `mapc build --range-max {:.1}` (docs/robot.md, \"Sensor reach\")",
+                self.short_reach,
+                self.shortest_reach,
+                self.reference_reach,
+                self.shortest_reach
+            );
+        }
         if !with_truth {
             return;
         }
