@@ -627,12 +627,19 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// The coarse histogram of the prepared scan (of a window matching a
     /// partial field of view); returns its cell count.
     pub fn histogram(&mut self) -> usize {
+        self.histogram_with(0.0)
+    }
+
+    /// [`Localizer::histogram`] without the scan's foreground surfaces at
+    /// most `foreground` m across ([`coarse::query_histogram_with`]).
+    fn histogram_with(&mut self, foreground: f32) -> usize {
         let b = &mut self.b;
         let s = &self.scan;
-        let (window, cells) = coarse::query_histogram(
+        let (window, cells) = coarse::query_histogram_with(
             &b.in_pts[..s.beams],
             s.fov,
             s.wrap,
+            foreground,
             self.params,
             b.r_pts,
             b.r_tan,
@@ -646,23 +653,34 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// Ranks the sites by the histogram of [`Localizer::histogram`] and
     /// applies the N_C rule; returns N_C, the candidates to examine.
     pub fn rank_sites(&mut self) -> usize {
+        let (ranked, nc) = self.rank_into(0);
+        self.ranked = ranked;
+        self.nc = nc;
+        nc
+    }
+
+    /// Ranks the sites by the histogram in the scratch into the ranked list
+    /// from position `from` (at most N_C max of them) and applies the N_C
+    /// rule to those; returns (sites ranked, N_C).
+    fn rank_into(&mut self, from: usize) -> (usize, usize) {
         let p = self.params;
         let b = &mut self.b;
-        let room = (p.coarse.nc_max as usize).min(b.top.len());
-        self.ranked = coarse::rank_sites_where(
+        let rest = &mut b.top[from..];
+        let room = rest.len().min(p.coarse.nc_max as usize);
+        let ranked = coarse::rank_sites_where(
             self.db,
             &b.hist[..self.cells],
             self.window,
-            &mut b.top[..room],
+            &mut rest[..room],
             self.prior.as_ref(),
         );
-        self.nc = coarse::candidate_count(
-            &b.top[..self.ranked],
+        let nc = coarse::candidate_count(
+            &rest[..ranked],
             p.coarse.nc_min as usize,
             p.coarse.nc_max as usize,
             p.coarse.nc_margin,
         );
-        self.nc
+        (ranked, nc)
     }
 
     /// Stage 2, the coarse stage: [`Localizer::histogram`] then
@@ -687,37 +705,10 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// foreground"). The background histogram replaces the first one in the
     /// scratch. Returns the new N_C (`examined` when nothing is added).
     pub fn rank_background(&mut self, examined: usize) -> usize {
-        let p = self.params;
         let kept = examined.min(self.nc);
-        let b = &mut self.b;
-        let s = &self.scan;
-        let (window, cells) = coarse::query_histogram_with(
-            &b.in_pts[..s.beams],
-            s.fov,
-            s.wrap,
-            coarse::FOREGROUND_WIDTH,
-            p,
-            b.r_pts,
-            b.r_tan,
-            b.hist,
-        );
-        self.window = window;
-        self.cells = cells;
-        let (first, rest) = b.top.split_at_mut(kept);
-        let room = rest.len().min(p.coarse.nc_max as usize);
-        let ranked = coarse::rank_sites_where(
-            self.db,
-            &b.hist[..cells],
-            window,
-            &mut rest[..room],
-            self.prior.as_ref(),
-        );
-        let nc = coarse::candidate_count(
-            &rest[..ranked],
-            p.coarse.nc_min as usize,
-            p.coarse.nc_max as usize,
-            p.coarse.nc_margin,
-        );
+        self.histogram_with(coarse::FOREGROUND_WIDTH);
+        let (_, nc) = self.rank_into(kept);
+        let (first, rest) = self.b.top.split_at_mut(kept);
         let mut added = 0;
         for j in 0..nc {
             let r = rest[j];

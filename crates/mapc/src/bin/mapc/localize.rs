@@ -596,9 +596,7 @@ impl Session {
             rec.record(db, k, scan, &r)?;
         }
         self.tally.times.push(time_us as f64);
-        let reach = match &scan.data {
-            ScanData::Ranges { range_max, .. } | ScanData::Points { range_max, .. } => *range_max,
-        };
+        let reach = scan.data.range_max();
         let reference = db.params().sensor.range_max;
         if reach < refloc::localize::SHORT_REACH * reference {
             let t = &mut self.tally;
@@ -741,9 +739,7 @@ impl OneMap<'_> {
         // The scan's beams as (angle in the sensor frame (rad), range (m)),
         // non-returns infinite.
         let beams = scan.data.beams();
-        let rmax = match &scan.data {
-            ScanData::Ranges { range_max, .. } | ScanData::Points { range_max, .. } => *range_max,
-        };
+        let rmax = scan.data.range_max();
         let offset = &db.params().sensor.offset;
         let sensor =
             refloc::Pose2::new(truth[0] as f32, truth[1] as f32, truth[2] as f32).compose(offset);

@@ -93,6 +93,13 @@ pub enum ScanData {
 }
 
 impl ScanData {
+    /// The sensor's maximum range (m).
+    pub fn range_max(&self) -> f32 {
+        match self {
+            ScanData::Ranges { range_max, .. } | ScanData::Points { range_max, .. } => *range_max,
+        }
+    }
+
     /// Number of beams (`Ranges`, including no-return beams) or points.
     pub fn len(&self) -> usize {
         match self {
