@@ -400,6 +400,7 @@ struct Bufs<'a> {
     /// its point over its range ([`Localizer::verify_pose_skewed`]).
     in_pts: &'a mut [[f32; 2]],
     in_rng: &'a mut [f32],
+    in_fg: &'a mut [u8],
     /// The prepared query: resampled points and tangents.
     q_pts: &'a mut [[f32; 2]],
     q_tan: &'a mut [[f32; 2]],
@@ -422,6 +423,7 @@ fn carve<'a>(d: &Dims, ar: &mut Arena<'a>) -> Option<Bufs<'a>> {
     Some(Bufs {
         in_pts: ar.take(d.beams)?,
         in_rng: ar.take(d.beams)?,
+        in_fg: ar.take(d.beams)?,
         q_pts: ar.take(d.points)?,
         q_tan: ar.take(d.points)?,
         r_dense: ar.take(d.ref_beams)?,
@@ -606,6 +608,13 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
                 needed: MIN_PREPARED_POINTS,
             });
         }
+        prep::foreground_mask(
+            &b.in_pts[..n],
+            wrap,
+            params.prep.jump_distance,
+            coarse::FOREGROUND_WIDTH,
+            b.in_fg,
+        );
         ssm::descriptors(
             &b.q_pts[..nq],
             &b.q_tan[..nq],
@@ -880,17 +889,18 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         let beams = self.b.in_pts[..n]
             .iter()
             .zip(&self.b.in_rng[..n])
+            .zip(&self.b.in_fg[..n])
             .enumerate()
-            .map(|(k, (p, &r))| {
+            .map(|(k, ((p, &r), &fg))| {
                 let u = [p[0] / r, p[1] / r];
                 if skew == 0.0 {
-                    return (u, r);
+                    return (u, r, fg != 0);
                 }
                 let phi = skew * refine::sweep_fraction(k, n);
                 let (s, c) = (libm::sinf(phi), libm::cosf(phi));
-                ([c * u[0] - s * u[1], s * u[0] + c * u[1]], r)
+                ([c * u[0] - s * u[1], s * u[0] + c * u[1]], r, fg != 0)
             });
-        verifier.score_dirs(sensor, beams)
+        verifier.score_marked(sensor, beams)
     }
 
     /// Refits the answer, candidate `best`, for a scanner that turned while

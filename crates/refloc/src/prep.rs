@@ -51,8 +51,9 @@ pub fn prepare(
 
 /// As [`prepare`], leaving out every *foreground surface* at most
 /// `foreground` metres across (0: none): a surface (a run of linked beams
-/// between depth jumps) whose end points are at most that far apart and
-/// whose neighbouring beams on both sides reach farther or return nothing.
+/// between depth jumps) whose end points are at most that far apart, at
+/// most twice that long along it, and whose neighbouring beams on both
+/// sides reach farther or return nothing ([`foreground_surface`]).
 /// A person or a box standing in the open is one; so is a pillar. At the
 /// edge of a partial field of view the side beyond is unknown, and a
 /// surface there is kept.
@@ -73,24 +74,8 @@ pub fn prepare_with(
         return 0;
     }
     let jd = params.prep.jump_distance;
-    let next = |i: usize| -> Option<usize> {
-        if i + 1 < n {
-            Some(i + 1)
-        } else if wrap {
-            Some(0)
-        } else {
-            None
-        }
-    };
-    let prev = |i: usize| -> Option<usize> {
-        if i > 0 {
-            Some(i - 1)
-        } else if wrap {
-            Some(n - 1)
-        } else {
-            None
-        }
-    };
+    let next = |i: usize| next_beam(i, n, wrap);
+    let prev = |i: usize| prev_beam(i, n, wrap);
     let linked = |i: usize, j: Option<usize>| match j {
         Some(j) => !is_jump(dense[i], dense[j], jd),
         None => false,
@@ -133,26 +118,7 @@ pub fn prepare_with(
         let has_prev = linked(i, prev(i));
         let has_next = linked(i, next(i));
         if foreground > 0.0 && !has_prev && has_next {
-            // The start of a surface: find its end.
-            let mut b = i;
-            let mut len = 0usize;
-            while len < n {
-                match next(b) {
-                    Some(j) if linked(b, Some(j)) && j != i => {
-                        b = j;
-                        len += 1;
-                    }
-                    _ => break,
-                }
-            }
-            let farther = |side: Option<usize>, end: usize| match side {
-                Some(k) => !dense[k][0].is_finite() || norm(dense[k]) > norm(dense[end]),
-                None => false,
-            };
-            if dist2(p, dense[b]) <= foreground * foreground
-                && farther(prev(i), i)
-                && farther(next(b), b)
-            {
+            if let Some(len) = foreground_surface(dense, i, wrap, jd, foreground) {
                 skip = len;
                 last = None;
                 continue;
@@ -182,26 +148,124 @@ pub fn prepare_with(
     count
 }
 
+/// When beam `i` of `dense` starts a *foreground surface* (see
+/// [`prepare_with`]: a run of linked beams whose end points are at most
+/// `width` m apart, at most twice that long along it (so a room that
+/// surrounds the sensor but for a narrow gap is not one), and whose
+/// neighbouring beams on both sides reach farther or return nothing; a
+/// single return counts), the number of beams after
+/// `i` in it; else `None`. `i` must start a surface (not linked to the
+/// beam before it). `jump_distance` (m) splits surfaces ([`is_jump`]).
+pub fn foreground_surface(
+    dense: &[[f32; 2]],
+    i: usize,
+    wrap: bool,
+    jump_distance: f32,
+    width: f32,
+) -> Option<usize> {
+    let n = dense.len();
+    let next = |k: usize| next_beam(k, n, wrap);
+    let prev = |k: usize| prev_beam(k, n, wrap);
+    let p = *dense.get(i)?;
+    if !p[0].is_finite() {
+        return None;
+    }
+    let mut b = i;
+    let mut len = 0usize;
+    let mut along = 0.0f32;
+    while len < n {
+        match next(b) {
+            Some(j) if j != i && !is_jump(dense[b], dense[j], jump_distance) => {
+                along += libm::sqrtf(dist2(dense[b], dense[j]));
+                b = j;
+                len += 1;
+            }
+            _ => break,
+        }
+    }
+    let farther = |side: Option<usize>, end: usize| match side {
+        Some(k) => !dense[k][0].is_finite() || norm(dense[k]) > norm(dense[end]),
+        None => false,
+    };
+    (dist2(p, dense[b]) <= width * width
+        && along <= 2.0 * width
+        && farther(prev(i), i)
+        && farther(next(b), b))
+    .then_some(len)
+}
+
+/// Marks in `out` (one flag per beam of `dense`, 1 = foreground, 0 = not)
+/// the beams of every foreground surface at most `width` m across
+/// ([`foreground_surface`]; `width` 0 marks none); returns how many beams
+/// are marked. The verification does not charge a short beam of one
+/// ([`crate::verify::Vicinity::occluded`]): people, boxes and chairs the
+/// map does not have.
+pub fn foreground_mask(
+    dense: &[[f32; 2]],
+    wrap: bool,
+    jump_distance: f32,
+    width: f32,
+    out: &mut [u8],
+) -> usize {
+    let n = dense.len().min(out.len());
+    out[..n].fill(0);
+    if n < 3 || !(width > 0.0) {
+        return 0;
+    }
+    let dense = &dense[..n];
+    let mut marked = 0;
+    for i in 0..n {
+        let starts = match prev_beam(i, n, wrap) {
+            Some(j) => is_jump(dense[j], dense[i], jump_distance),
+            None => true,
+        };
+        if !starts {
+            continue;
+        }
+        if let Some(len) = foreground_surface(dense, i, wrap, jump_distance, width) {
+            for k in 0..=len {
+                out[(i + k) % n] = 1;
+            }
+            marked += len + 1;
+        }
+    }
+    marked
+}
+
+/// The beam after `i` of `n`: `i + 1`, or the first after the last when the
+/// scan wraps.
+fn next_beam(i: usize, n: usize, wrap: bool) -> Option<usize> {
+    if i + 1 < n {
+        Some(i + 1)
+    } else if wrap {
+        Some(0)
+    } else {
+        None
+    }
+}
+
+/// The beam before `i` of `n`: `i - 1`, or the last before the first when
+/// the scan wraps.
+fn prev_beam(i: usize, n: usize, wrap: bool) -> Option<usize> {
+    if i > 0 {
+        Some(i - 1)
+    } else if wrap {
+        Some(n - 1)
+    } else {
+        None
+    }
+}
+
 /// Unit tangent at dense point `i`, from the farthest linked points within
 /// [`TANGENT_RADIUS`] on each side, oriented along increasing beam index.
 fn tangent(dense: &[[f32; 2]], i: usize, wrap: bool, jd: f32) -> Option<[f32; 2]> {
     let n = dense.len();
     let r2 = TANGENT_RADIUS * TANGENT_RADIUS;
-    let step = |k: usize, fwd: bool| -> Option<usize> {
+    let step = |k: usize, fwd: bool| {
         if fwd {
-            if k + 1 < n {
-                Some(k + 1)
-            } else if wrap {
-                Some(0)
-            } else {
-                None
-            }
-        } else if k > 0 {
-            Some(k - 1)
-        } else if wrap {
-            Some(n - 1)
+            next_beam(k, n, wrap)
         } else {
-            None
+            prev_beam(k, n, wrap)
         }
     };
     let mut ends = [i, i];

@@ -1292,6 +1292,7 @@ fn evidence_takes_a_share_of_a_hit_per_short_beam() {
         short: 4,
         long: 0,
         through: 0,
+        occluded: 0,
     };
     assert_eq!(v.evidence(0.0, 0.0), 90.0);
     assert_eq!(v.evidence(0.5, 0.0), 90.0 - 4.0 * 4.5 * 0.5);
@@ -1301,6 +1302,61 @@ fn evidence_takes_a_share_of_a_hit_per_short_beam() {
     assert_eq!(v.evidence(1.0, 0.9), 90.0);
     let loose = crate::verify::Vicinity { score: 45.0, ..v };
     assert_eq!(loose.evidence(1.0, 0.9), 45.0 - 4.0 * 4.5);
+    // Short beams of a person in front of a fitting wall cost nothing.
+    let hidden = crate::verify::Vicinity {
+        occluded: 3,
+        ..loose
+    };
+    assert_eq!(hidden.evidence(1.0, 0.9), 45.0 - 4.5);
+}
+
+#[test]
+fn short_beams_of_a_person_before_a_fitting_wall_are_occluded() {
+    let buf = tiny_db();
+    let db = RefDb::new(buf.bytes()).unwrap();
+    let grid = db.grid();
+    let frame = db.frame();
+    let p = frame.to_map([10.5, 15.5]);
+    let sensor = Pose2::new(p[0], p[1], frame.origin.theta);
+    let verifier = crate::verify::Verifier::new(&db, &grid, fixture::RANGE_MAX);
+    // From (10.5, 15.5) the inner wall is 0.95 m away along +u; `ranges`
+    // are the beams in scan order, `fg` marks the foreground ones.
+    let score = |ranges: &[f32], fg: &[bool]| {
+        let beams = ranges.iter().zip(fg).enumerate().map(|(k, (&r, &f))| {
+            let a = k as f32 * 0.001;
+            ([a.cos(), a.sin()], r, f)
+        });
+        verifier.score_marked(&sensor, beams)
+    };
+    let marks = [false, false, true, true, true, false, false];
+    // A person 0.5 m away between beams that fit the wall.
+    let person = [0.95, 0.95, 0.5, 0.5, 0.5, 0.95, 0.95];
+    let v = score(&person, &marks);
+    assert_eq!((v.short, v.occluded), (3, 3), "{v:?}");
+    assert!(v.evidence(1.0, 2.0) > v.score - 0.1, "{v:?}");
+    // The same short beams not marked as foreground: charged.
+    let v = score(&person, &[false; 7]);
+    assert_eq!((v.short, v.occluded), (3, 0), "{v:?}");
+    // Beside it, the beams do not fit (0.3 m past the wall): a wrong pose.
+    let misfit = [1.25, 1.25, 0.5, 0.5, 0.5, 1.25, 1.25];
+    let v = score(&misfit, &marks);
+    assert_eq!((v.short, v.occluded), (3, 0), "{v:?}");
+    // One side fits, the other does not: charged.
+    let one_side = [0.95, 0.95, 0.5, 0.5, 0.5, 1.25, 1.25];
+    assert_eq!(score(&one_side, &marks).occluded, 0);
+    // At the end of the scan there is no beam after it: charged.
+    let at_end = [0.95, 0.95, 0.95, 0.95, 0.5, 0.5, 0.5];
+    let end_marks = [false, false, false, false, true, true, true];
+    assert_eq!(score(&at_end, &end_marks).occluded, 0);
+    // Beams without a return between the person and the wall are skipped.
+    let gap = [0.95, f32::NAN, 0.5, 0.5, 0.5, f32::NAN, 0.95];
+    assert_eq!(score(&gap, &marks).occluded, 3);
+    // `score_dirs` marks nothing.
+    let plain = person.iter().enumerate().map(|(k, &r)| {
+        let a = k as f32 * 0.001;
+        ([a.cos(), a.sin()], r)
+    });
+    assert_eq!(verifier.score_dirs(&sensor, plain).occluded, 0);
 }
 
 #[test]
@@ -1600,6 +1656,40 @@ fn foreground_surfaces_are_left_out_and_walls_kept() {
     assert!(prepared_ranges(&middle, false, 1.0)
         .iter()
         .all(|&r| r > 3.9));
+}
+
+#[test]
+fn foreground_mask_marks_the_person_and_nothing_else() {
+    let p = fixture::params();
+    let jd = p.prep.jump_distance;
+    let person = room_with_blocker(360, 4.0, 1.0, 100, 117);
+    let mut mask = vec![9u8; 360];
+    assert_eq!(prep::foreground_mask(&person, true, jd, 1.0, &mut mask), 17);
+    assert!(mask
+        .iter()
+        .enumerate()
+        .all(|(k, &m)| m == u8::from((100..117).contains(&k))));
+    // Width 0 marks nothing (and clears what was there).
+    assert_eq!(prep::foreground_mask(&person, true, jd, 0.0, &mut mask), 0);
+    assert!(mask.iter().all(|&m| m == 0));
+    // Across the wrap of a full turn: marked on both ends.
+    let across = room_with_blocker(360, 4.0, 1.0, 0, 9);
+    let mut rotated = across[5..].to_vec();
+    rotated.extend_from_slice(&across[..5]);
+    assert_eq!(prep::foreground_mask(&rotated, true, jd, 1.0, &mut mask), 9);
+    assert!(mask[355..].iter().all(|&m| m == 1) && mask[..4].iter().all(|&m| m == 1));
+    assert_eq!(mask.iter().filter(|&&m| m == 1).count(), 9);
+    // Too wide, a recess, or at the edge of a partial view: not foreground.
+    let wide = room_with_blocker(360, 4.0, 1.0, 100, 176);
+    assert_eq!(prep::foreground_mask(&wide, true, jd, 1.0, &mut mask), 0);
+    let recess = room_with_blocker(360, 1.0, 4.0, 100, 104);
+    assert_eq!(prep::foreground_mask(&recess, true, jd, 1.0, &mut mask), 0);
+    let edge: Vec<[f32; 2]> = person[100..200].to_vec();
+    assert_eq!(prep::foreground_mask(&edge, false, jd, 1.0, &mut mask), 0);
+    // A single return in front of the wall is foreground too.
+    let single = room_with_blocker(360, 4.0, 1.0, 50, 51);
+    assert_eq!(prep::foreground_mask(&single, true, jd, 1.0, &mut mask), 1);
+    assert_eq!(mask[50], 1);
 }
 
 /// The tiny database ranking `nc` candidates at a time (N_C = `nc`).

@@ -63,6 +63,13 @@ pub struct Vicinity {
     /// return, a reflection) does not count; a wall seen through over an
     /// angular extent does.
     pub through: u32,
+    /// Of the short beams, those on a foreground surface of the scan
+    /// (something person-sized in front of farther returns,
+    /// [`crate::prep::foreground_mask`]) whose nearest beams with a return
+    /// on both sides outside it fit the map: a person or a chair in front
+    /// of a wall the pose explains. [`Vicinity::evidence`] does not charge
+    /// them. At a wrong pose the beams beside such a surface rarely fit.
+    pub occluded: u32,
 }
 
 impl Vicinity {
@@ -164,6 +171,17 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
         sensor: &Pose2,
         beams: impl Iterator<Item = ([f32; 2], f32)>,
     ) -> Vicinity {
+        self.score_marked(sensor, beams.map(|(u, r)| (u, r, false)))
+    }
+
+    /// [`Verifier::score_dirs`] for beams that also say whether they lie on
+    /// a foreground surface of the scan ([`crate::prep::foreground_mask`]),
+    /// for [`Vicinity::occluded`]; the beams come in scan order.
+    pub fn score_marked(
+        &self,
+        sensor: &Pose2,
+        beams: impl Iterator<Item = ([f32; 2], f32, bool)>,
+    ) -> Vicinity {
         let frame = &self.frame;
         // Sensor frame to grid axes, and to the map frame (for end points).
         let to_cells = frame.angle_to_cells(sensor.theta);
@@ -179,14 +197,21 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
         let mut short = 0u32;
         let mut long = 0u32;
         let mut through = 0u32;
+        let mut occluded = 0u32;
+        // The foreground surface being read: its short beams so far, and
+        // whether the beam with a return before it fitted the map.
+        let mut fg_run: Option<(u32, bool)> = None;
+        let mut last_fit = false;
         let min_run = self.through_run.max(1);
         let mut run = 0u32;
-        for (u, r) in beams {
+        for (u, r, fg) in beams {
             if !r.is_finite() {
                 continue;
             }
             n += 1;
             let mut through_here = false;
+            let mut fits = false;
+            let mut is_short = false;
             // A surface farther than r + lim only makes the beam short, as
             // no surface at all does: the cast stops a cell beyond that.
             let reach = ((r + lim) * inv_res + 1.0).min(max_cells);
@@ -210,8 +235,9 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
                     let d = libm::fabsf(v - r);
                     if d < lim {
                         m += HIT_SCORE - d * d * inv;
+                        fits = true;
                     } else if r < v {
-                        short += 1;
+                        is_short = true;
                     } else {
                         long += 1;
                         if r - v >= self.through_excess {
@@ -227,7 +253,19 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
                         }
                     }
                 }
-                None => short += 1, // no surface within reach
+                None => is_short = true, // no surface within reach
+            }
+            short += u32::from(is_short);
+            if fg {
+                let (pending, _) = fg_run.get_or_insert((0, last_fit));
+                *pending += u32::from(is_short);
+            } else {
+                if let Some((pending, before)) = fg_run.take() {
+                    if before && fits {
+                        occluded += pending;
+                    }
+                }
+                last_fit = fits;
             }
             if through_here {
                 run += 1;
@@ -247,6 +285,7 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
             short,
             long,
             through,
+            occluded,
         }
     }
 }
@@ -256,15 +295,18 @@ impl Vicinity {
     /// short fit the map at least `occlusion_fit` well
     /// ([`Vicinity::explained_ratio`]; the short beams are then taken for
     /// unmapped things in front, people and clutter), else
-    /// `M - HIT_SCORE short_weight short`: each beam that ends in front of where
-    /// the map has a surface costs a share of a hit's weight, as it does on
-    /// a wrong map, where the rest of the scan fits only loosely.
+    /// `M - HIT_SCORE short_weight (short - occluded)`: each beam that ends
+    /// in front of where the map has a surface costs a share of a hit's
+    /// weight, as it does on a wrong map, where the rest of the scan fits
+    /// only loosely, unless it is on a person-sized surface standing in
+    /// front of a surface the pose explains ([`Vicinity::occluded`]).
     /// `short_weight` 0 gives the paper's M.
     pub fn evidence(&self, short_weight: f32, occlusion_fit: f32) -> f32 {
         if occlusion_fit > 0.0 && self.explained_ratio() >= occlusion_fit {
             self.score
         } else {
-            self.score - HIT_SCORE * short_weight * self.short as f32
+            let charged = self.short.saturating_sub(self.occluded);
+            self.score - HIT_SCORE * short_weight * charged as f32
         }
     }
 
