@@ -1713,6 +1713,20 @@ fn fixed_candidates_db(nc: u32) -> Aligned {
 /// by the histogram without foreground (scored site by site here), less
 /// those in `first`, in rank order.
 fn expected_background(db: &RefDb<&[u8]>, ranges: &[f32], first: &[u32]) -> Vec<u32> {
+    let take = db.params().coarse.nc_max as usize;
+    expected_more(db, ranges, first, coarse::FOREGROUND_WIDTH, take)
+}
+
+/// The `take` best sites by the histogram of the scan without foreground
+/// surfaces `foreground` m across (scored site by site here), less those in
+/// `first`, in rank order.
+fn expected_more(
+    db: &RefDb<&[u8]>,
+    ranges: &[f32],
+    first: &[u32],
+    foreground: f32,
+    take: usize,
+) -> Vec<u32> {
     let p = db.params();
     let n = ranges.len();
     let inc = 2.0 * PI / n as f32;
@@ -1731,7 +1745,7 @@ fn expected_background(db: &RefDb<&[u8]>, ranges: &[f32], first: &[u32]) -> Vec<
         &dense,
         2.0 * PI,
         true,
-        coarse::FOREGROUND_WIDTH,
+        foreground,
         p,
         &mut pts,
         &mut tan,
@@ -1743,7 +1757,7 @@ fn expected_background(db: &RefDb<&[u8]>, ranges: &[f32], first: &[u32]) -> Vec<
     scored.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
     scored
         .iter()
-        .take(p.coarse.nc_max as usize)
+        .take(take)
         .map(|s| s.0)
         .filter(|s| !first.contains(s))
         .collect()
@@ -1812,6 +1826,78 @@ fn only_a_rejected_answer_gets_the_background_pass_and_it_adds_new_sites() {
         rejected > 0 && added > 0,
         "{rejected} rejected, {added} added"
     );
+}
+
+#[test]
+fn a_crowded_rejected_scan_gets_the_deeper_pass_and_discounted_odds() {
+    use crate::localize::{CROWDED_SHARE, DEEPER_MAX, DEEPER_ODDS};
+    let buf = fixed_candidates_db(1);
+    let db = RefDb::new(buf.bytes()).expect("valid");
+    let model = db.decision().expect("the fixture has a model");
+    let (_, clean) = truth_and_scan();
+    // Five people close to the sensor, 12 beams each: a sixth of the scan
+    // on foreground surfaces.
+    let mut crowd = clean.clone();
+    for k in 0..5 {
+        for r in &mut crowd[20 + 70 * k..32 + 70 * k] {
+            *r = 0.35;
+        }
+    }
+    let mut deeper = 0;
+    for (scan, crowded) in [(&clean, false), (&crowd, true)] {
+        let mut scratch = vec![0u8; scratch_size(db.params(), scan.len())];
+        let mut loc = crate::Localizer::new(&db, &mut scratch, scan.len()).unwrap();
+        let prepared = loc.prepare(&ranges_scan(scan)).unwrap();
+        assert_eq!(loc.crowded(), crowded, "{prepared:?}");
+        assert_eq!(
+            loc.crowded(),
+            prepared.foreground as f32 >= CROWDED_SHARE * prepared.valid as f32
+        );
+        if !crowded {
+            continue;
+        }
+        let nc = loc.rank();
+        let mut search = crate::select::Search::new(db.params()).with_decision(model);
+        let run = |loc: &mut crate::Localizer<'_, '_, &[u8]>,
+                   search: &mut crate::select::Search,
+                   from: usize,
+                   to: usize| {
+            for c in from..to {
+                if loc.examine(c).is_some_and(|e| e.has_pose != 0) {
+                    search.record(loc.candidates(c + 1), loc.ranked()[c].gamma);
+                }
+            }
+        };
+        run(&mut loc, &mut search, 0, nc);
+        let total = loc.rank_background(nc);
+        run(&mut loc, &mut search, nc, total);
+        let first: Vec<u32> = loc.ranked()[..total].iter().map(|r| r.site).collect();
+        // The deeper pass appends the first ranking's next sites, in its
+        // order, less those already examined.
+        let end = loc.rank_deeper(total);
+        let new: Vec<u32> = loc.ranked()[total..end].iter().map(|r| r.site).collect();
+        let take = db.params().coarse.nc_max as usize + DEEPER_MAX;
+        let mut expected = expected_more(&db, scan, &first, 0.0, take);
+        expected.truncate(DEEPER_MAX);
+        assert_eq!(new, expected);
+        assert!(!new.is_empty(), "the fixture has sites left to add");
+        run(&mut loc, &mut search, total, end);
+        // After it, the answer's confidence has its odds divided by
+        // DEEPER_ODDS, and accepted still means at least the threshold.
+        if let Some(best) = search.best() {
+            let cands = loc.candidates(end);
+            let p = search.confidence(cands, best);
+            let odds = p / (1.0 - p) / DEEPER_ODDS;
+            let discounted = odds / (1.0 + odds);
+            assert_eq!(
+                loc.answer_accepted(&search, end),
+                cands[best].has_pose != 0 && discounted >= model.threshold,
+                "confidence {p}, discounted {discounted}"
+            );
+        }
+        deeper += 1;
+    }
+    assert_eq!(deeper, 1);
 }
 
 #[test]

@@ -1291,9 +1291,10 @@ fn exercise(db: &RefDb<&[u8]>, scans: &[Vec<f32>], scratch: &mut Vec<u8>) -> boo
         });
         if let Ok(l) = localize(db, &scan, scratch) {
             any_ok = true;
-            // The first ranking's N_C, then at most BACKGROUND_MAX more.
+            // The first ranking's N_C, then at most BACKGROUND_MAX more
+            // and, for a crowded scan, DEEPER_MAX more.
             let nc = db.params().coarse.nc_max as usize;
-            let most = nc + nc.min(crate::localize::BACKGROUND_MAX);
+            let most = nc + nc.min(crate::localize::BACKGROUND_MAX) + crate::localize::DEEPER_MAX;
             assert!(l.candidates.len() <= most);
             assert!((l.site as usize) < n);
         }
