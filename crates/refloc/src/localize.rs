@@ -252,7 +252,8 @@ pub struct Localization<'s> {
     pub accepted: bool,
     /// Probability (0..=1) that the pose is right ([`crate::confidence`]):
     /// the database's model, or [`crate::confidence::Decision::DEFAULT`] in
-    /// a database without one.
+    /// a database without one; after a deeper pass with its odds divided
+    /// by [`DEEPER_ODDS`]; at most 0.5 when ambiguous.
     pub confidence: f32,
     /// Covariance of `pose` (row-major 3x3 over x, y, theta; m^2, m rad,
     /// rad^2) from the fit of the scan to the map
@@ -770,13 +771,18 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// histogram replaces the background one in the scratch. Returns the
     /// new N_C (`examined` when nothing is added).
     pub fn rank_deeper(&mut self, examined: usize) -> usize {
-        self.deeper_from = examined.min(self.nc);
-        self.rank_more(examined, 0.0, DEEPER_MAX, DEEPER_MAX)
+        let kept = examined.min(self.nc);
+        let nc = self.rank_more(examined, 0.0, DEEPER_MAX, DEEPER_MAX);
+        // Confidences are discounted only when there was more to examine.
+        if nc > kept {
+            self.deeper_from = kept;
+        }
+        nc
     }
 
-    /// A hypothesis's confidence `p` as reported: after the deeper pass
-    /// (which runs only when the answer so far would be rejected), with
-    /// its odds divided by [`DEEPER_ODDS`]; else `p` itself.
+    /// A hypothesis's confidence `p` as reported: after a deeper pass that
+    /// added candidates (it runs only when the answer so far would be
+    /// rejected), with its odds divided by [`DEEPER_ODDS`]; else `p`.
     fn discounted(&self, p: f32) -> f32 {
         if self.deeper_from == usize::MAX || !(p < 1.0) {
             return p;
