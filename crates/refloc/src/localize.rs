@@ -562,8 +562,8 @@ pub struct Localizer<'d, 's, D: AsRef<[u8]>> {
     cells: usize,
     ranked: usize,
     nc: usize,
-    /// The first candidate of the deeper pass (`usize::MAX` before it).
-    deeper_from: usize,
+    /// A deeper pass added candidates: confidences are discounted.
+    discount: bool,
     prior: Option<Prior>,
 }
 
@@ -607,7 +607,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
             cells: 0,
             ranked: 0,
             nc: 0,
-            deeper_from: usize::MAX,
+            discount: false,
             prior: None,
         })
     }
@@ -665,7 +665,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
             foreground,
         };
         self.nc = 0;
-        self.deeper_from = usize::MAX;
+        self.discount = false;
         Ok(self.scan)
     }
 
@@ -774,9 +774,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         let kept = examined.min(self.nc);
         let nc = self.rank_more(examined, 0.0, DEEPER_MAX, DEEPER_MAX);
         // Confidences are discounted only when there was more to examine.
-        if nc > kept {
-            self.deeper_from = kept;
-        }
+        self.discount |= nc > kept;
         nc
     }
 
@@ -784,7 +782,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// added candidates (it runs only when the answer so far would be
     /// rejected), with its odds divided by [`DEEPER_ODDS`]; else `p`.
     fn discounted(&self, p: f32) -> f32 {
-        if self.deeper_from == usize::MAX || !(p < 1.0) {
+        if !self.discount || !(p < 1.0) {
             return p;
         }
         let odds = p / (1.0 - p) / DEEPER_ODDS;

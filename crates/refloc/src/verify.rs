@@ -198,9 +198,10 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
         let mut long = 0u32;
         let mut through = 0u32;
         let mut occluded = 0u32;
-        // The foreground surface being read: its short beams so far, and
-        // whether the beam with a return before it fitted the map.
-        let mut fg_run: Option<(u32, bool)> = None;
+        // The short beams so far of the foreground surface being read (0
+        // between surfaces), and whether the last beam with a return off
+        // the foreground fitted the map: the one before that surface.
+        let mut pending = 0u32;
         let mut last_fit = false;
         let min_run = self.through_run.max(1);
         let mut run = 0u32;
@@ -257,14 +258,12 @@ impl<G: Occupancy + ?Sized> Verifier<'_, G> {
             }
             short += u32::from(is_short);
             if fg {
-                let (pending, _) = fg_run.get_or_insert((0, last_fit));
-                *pending += u32::from(is_short);
+                pending += u32::from(is_short);
             } else {
-                if let Some((pending, before)) = fg_run.take() {
-                    if before && fits {
-                        occluded += pending;
-                    }
+                if last_fit && fits {
+                    occluded += pending;
                 }
+                pending = 0;
                 last_fit = fits;
             }
             if through_here {
