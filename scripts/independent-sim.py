@@ -32,6 +32,17 @@ Classes (each scan independently, from the same seed):
   clutter        1 to 4 square boxes 0.3-1.0 m, 1-5 m away, plus the noise
   dropouts       the noise above, and 1-4 runs of 5-40 beams with no return
                  plus 5% of the other beams dropped at random
+  removed        1 to 3 squares of 0.5-1.0 m of the map's occupied cells
+                 within 8 m erased from the world (furniture moved away),
+                 plus the noise
+  shifted        the world shifted by up to 5 cm, turned by up to 0.5 deg
+                 and scaled by up to 0.3% about the sensor against the map
+                 (a map from another run), plus the noise
+  motion         the scan swept in 0.1 s while the robot turns at up to
+                 1 rad/s and drives at up to 0.5 m/s; the truth is the pose
+                 at the first beam (the LaserScan stamp's convention), plus
+                 the noise
+These three are not in the default --classes (added 2026-12-07).
 No-returns are written as JSON null (`--no-return null`, the default) or
 as the scan's range_max (`--no-return max`, as Stage and some drivers do).
 """
@@ -137,6 +148,31 @@ class World:
             out[k] = hi
         return out
 
+    def erase_near(self, x, y, rng, n, reach, side):
+        """Erases n squares of occupied cells (sides uniform in `side`, m)
+        centred on occupied cells within `reach` m of (x, y); returns what
+        to restore."""
+        cx, cy = self.cell(np.array([x]), np.array([y]))
+        k = int(reach / self.res)
+        y0, y1 = max(0, cy[0] - k), min(self.h, cy[0] + k + 1)
+        x0, x1 = max(0, cx[0] - k), min(self.w, cx[0] + k + 1)
+        ys, xs = np.nonzero(self.occ[y0:y1, x0:x1])
+        saved = []
+        if len(xs) == 0:
+            return saved
+        for _ in range(n):
+            i = rng.integers(len(xs))
+            half = int(round(rng.uniform(*side) / self.res / 2))
+            ey, ex = y0 + ys[i], x0 + xs[i]
+            sl = (slice(max(0, ey - half), ey + half + 1), slice(max(0, ex - half), ex + half + 1))
+            saved.append((sl, self.occ[sl].copy()))
+            self.occ[sl] = False
+        return saved
+
+    def restore(self, saved):
+        for sl, old in reversed(saved):
+            self.occ[sl] = old
+
     def poses(self, n, rng):
         # Clearance from every cell that is not free (occupied or unknown):
         # a pose in mapped free space, not on a streak of free cells that a
@@ -238,7 +274,33 @@ def main():
                 ang = th + rel
                 if cls != "static":
                     ang = ang + crng.normal(0.0, math.radians(0.1), a.beams)
-                r = world.cast(x, y, ang, a.range_max)
+                if cls == "shifted":
+                    # World = map moved by A(p) = s + k R (p - s) + t about
+                    # the sensor s; casting in it from s along d is casting
+                    # in the map from A^-1(s) along R^-1 d, ranges times k.
+                    t = crng.uniform(-0.05, 0.05, 2)
+                    rot = math.radians(crng.uniform(-0.5, 0.5))
+                    ks = 1.0 + crng.uniform(-0.003, 0.003)
+                    c, s_ = math.cos(-rot), math.sin(-rot)
+                    sx, sy = x - (c * t[0] - s_ * t[1]) / ks, y - (s_ * t[0] + c * t[1]) / ks
+                    r = world.cast(sx, sy, ang - rot, a.range_max / ks) * ks
+                elif cls == "motion":
+                    omega = crng.uniform(-1.0, 1.0)
+                    v = crng.uniform(0.0, 0.5)
+                    tk = 0.1 * np.arange(a.beams) / a.beams
+                    r = np.empty(a.beams)
+                    for j in range(0, a.beams, 8):
+                        tm = tk[j:j + 8].mean()
+                        hm = th + omega * tm
+                        bx, by = x + v * tm * math.cos(hm), y + v * tm * math.sin(hm)
+                        r[j:j + 8] = world.cast(bx, by, ang[j:j + 8] + omega * tk[j:j + 8],
+                                                a.range_max)
+                elif cls == "removed":
+                    saved = world.erase_near(x, y, crng, int(crng.integers(1, 4)), 8.0, (0.5, 1.0))
+                    r = world.cast(x, y, ang, a.range_max)
+                    world.restore(saved)
+                else:
+                    r = world.cast(x, y, ang, a.range_max)
                 if cls == "people":
                     discs = []
                     for _ in range(crng.integers(1, 11)):

@@ -468,15 +468,17 @@ pub const REFINE_GATE: f32 = 0.1;
 /// The answer is refitted with the scan's skew (a scanner that turned
 /// while it scanned, [`refine::skew_fit`]) only when the skewed fit's
 /// robust cost is at most this share of the rigid fit's: the turn must
-/// explain at least half of what the rigid fit leaves. Real scans of the
-/// shared logs (scanners sweeping in 13-27 ms) gain little from a skew
-/// (cost ratio median 0.91-0.98, 10th percentile 0.69-0.79 for right
-/// answers, 0.80 and more for wrong ones on Intel and ACES); scans
-/// simulated while turning at up to 1 rad/s over a 0.1 s sweep gain a
-/// lot (median 0.13-0.17, and 0.02-0.04 for the right answers the rigid
-/// fit got rejected). Half is a round margin between them
-/// (docs/results.md, "A scan skew for the answer").
-pub const SKEW_COST_RATIO: f32 = 0.5;
+/// explain at least a fifth of what the rigid fit leaves. First set to a
+/// half on noise-free simulated turning scans (cost ratio median
+/// 0.13-0.17); with range noise (1 cm + 1% of the range, as real
+/// sensors have) the noise stays in both costs and a turn at up to 1
+/// rad/s explains less of the total, so a half left right answers of
+/// turning scans rejected. 0.8 was chosen among 0.5, 0.7, 0.8 and 1.0 on
+/// the independent simulator's turning scans (seed 5) and the real logs
+/// (1.0 adds false accepts on ACES), and checked on seed 6, the
+/// disturbance suite and the paper's experiments (docs/results.md, "A
+/// scan skew for the answer" and "Turning scans with range noise").
+pub const SKEW_COST_RATIO: f32 = 0.8;
 
 /// The least number of resampled query points the fine stage works with.
 pub const MIN_PREPARED_POINTS: usize = 8;
