@@ -146,13 +146,24 @@ pub(crate) mod fixture {
     /// Ranges (m, `INFINITY` for no return) of a sensor at map-frame `pose`
     /// with `beams` beams from `angle_min` in steps of `inc`.
     pub(crate) fn scan_at(pose: Pose2, beams: usize, angle_min: f32, inc: f32) -> Vec<f32> {
+        scan_along(pose, beams, |k| pose.theta + angle_min + k as f32 * inc)
+    }
+
+    /// Ranges (m, `INFINITY` for no return) of `beams` beams cast from the
+    /// position of `pose`, beam `k` along the map-frame bearing
+    /// `bearing(k)` (rad).
+    pub(crate) fn scan_along(
+        pose: Pose2,
+        beams: usize,
+        bearing: impl Fn(usize) -> f32,
+    ) -> Vec<f32> {
         let words = grid_words();
         let grid = BitGrid::new(W, H, &words).expect("grid words");
         let f = frame();
         let uv = f.to_cells([pose.x, pose.y]);
         (0..beams)
             .map(|k| {
-                let a = f.angle_to_cells(pose.theta + angle_min + k as f32 * inc);
+                let a = f.angle_to_cells(bearing(k));
                 match cast(&grid, uv[0], uv[1], a, RANGE_MAX / f.resolution) {
                     Some(t) => t * f.resolution,
                     None => f32::INFINITY,
@@ -1495,24 +1506,10 @@ fn a_polygon_prior_keeps_the_answer_inside_it_and_excludes_it_elsewhere() {
 /// turns by `skew` (rad) over its sweep, `truth` being the pose at the
 /// sweep's middle.
 fn turning_scan(truth: Pose2, n: usize, skew: f32) -> Vec<f32> {
-    let words = fixture::grid_words();
-    let grid = crate::raycast::BitGrid::new(fixture::W, fixture::H, &words).unwrap();
-    let f = fixture::frame();
-    let uv = f.to_cells([truth.x, truth.y]);
     let inc = 2.0 * PI / n as f32;
-    (0..n)
-        .map(|k| {
-            let a = truth.theta - PI + k as f32 * inc + skew * crate::refine::sweep_fraction(k, n);
-            crate::raycast::cast(
-                &grid,
-                uv[0],
-                uv[1],
-                f.angle_to_cells(a),
-                fixture::RANGE_MAX / f.resolution,
-            )
-            .map_or(f32::INFINITY, |t| t * f.resolution)
-        })
-        .collect()
+    fixture::scan_along(truth, n, |k| {
+        truth.theta - PI + k as f32 * inc + skew * crate::refine::sweep_fraction(k, n)
+    })
 }
 
 /// A scan taken while turning: the answer is refitted with the turn (its
