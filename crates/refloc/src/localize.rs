@@ -462,8 +462,21 @@ fn carve<'a>(d: &Dims, ar: &mut Arena<'a>) -> Option<Bufs<'a>> {
 /// scan into a right one. Chosen on the real Intel and ACES logs (the
 /// right candidates' SSM poses fall below 0.1 in 6% of cases, all of them
 /// scans whose right pose other sites also found; 53-68% of all candidates
-/// do), checked on the CSAIL log held out (docs/performance.md).
+/// do), checked on the CSAIL log held out (docs/performance.md). A crowded
+/// scan also refines by [`CROWDED_REFINE_GATE`].
 pub const REFINE_GATE: f32 = 0.1;
+
+/// In a crowded scan ([`Localizer::crowded`]) an SSM pose is also refined
+/// when its vicinity score M (which does not charge the beams that end short
+/// of the map) is at least this share of its maximum. The evidence charges
+/// those beams, and in a crowd they are the people: a nearly right SSM pose
+/// of a crowded scan fell under [`REFINE_GATE`] and kept its rough pose.
+/// Chosen among 0.1, 0.2 and 0.3 on `mapc eval`'s people scans, the
+/// independent simulator's seed-5 people and clutter scans and the real
+/// logs (0.1 gains as much and costs CSAIL's real queries 11% more
+/// instructions on average, 0.3 gains less), reported on other sets
+/// (docs/results.md, "Refining crowded scans").
+pub const CROWDED_REFINE_GATE: f32 = 0.2;
 
 /// The answer is refitted with the scan's skew (a scanner that turned
 /// while it scanned, [`refine::skew_fit`]) only when the skewed fit's
@@ -923,9 +936,10 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
 
     /// The refined sensor pose and its vicinity, from SSM's pose `sensor`:
     /// the SSM pose is verified first, and refined (then verified again)
-    /// only when its evidence is at least [`REFINE_GATE`] of its maximum;
-    /// otherwise it is kept as it is. Without refinement in the database,
-    /// the SSM pose and its vicinity.
+    /// only when its evidence is at least [`REFINE_GATE`] of its maximum
+    /// (or, in a crowded scan, its vicinity score at least
+    /// [`CROWDED_REFINE_GATE`] of it); otherwise it is kept as it is.
+    /// Without refinement in the database, the SSM pose and its vicinity.
     pub fn refine_if_promising(&self, sensor: Pose2) -> (Pose2, verify::Vicinity) {
         let (pose, v, _) = self.refine_if_promising_spread(sensor);
         (pose, v)
@@ -937,12 +951,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     fn refine_if_promising_spread(&self, sensor: Pose2) -> (Pose2, verify::Vicinity, f32) {
         let p = self.params;
         let v = self.verify_pose(&sensor);
-        if p.refine.refine_iters == 0
-            || verify::ratio(
-                v.evidence(p.verify.short_weight, p.verify.occlusion_fit),
-                v.pairs,
-            ) < REFINE_GATE
-        {
+        if p.refine.refine_iters == 0 || !self.worth_refining(&v) {
             return (sensor, v, self.spread_at(&sensor));
         }
         let res = self.db.frame().resolution;
@@ -956,6 +965,17 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         );
         let spread = confidence::spread_feature(spread, res);
         (refined, self.verify_pose(&refined), spread)
+    }
+
+    /// True when a pose of vicinity `v` is refined: its evidence is at
+    /// least [`REFINE_GATE`] of its maximum or, in a crowded scan
+    /// ([`Localizer::crowded`]), its vicinity score M is at least
+    /// [`CROWDED_REFINE_GATE`] of its maximum.
+    fn worth_refining(&self, v: &verify::Vicinity) -> bool {
+        let p = self.params;
+        let evidence = v.evidence(p.verify.short_weight, p.verify.occlusion_fit);
+        verify::ratio(evidence, v.pairs) >= REFINE_GATE
+            || (self.crowded() && v.vicinity_ratio() >= CROWDED_REFINE_GATE)
     }
 
     /// The vicinity score of a sensor pose (map frame) for the prepared scan.

@@ -1613,6 +1613,45 @@ fn only_a_pose_that_explains_part_of_the_scan_is_refined() {
     assert_eq!(vk, w);
 }
 
+/// A crowd in front of the walls: beams that end short of the map cost
+/// the evidence, so a nearly right SSM pose of a crowded scan can have
+/// almost none. In a crowded scan the gate also reads the vicinity score
+/// M, which they do not lower, and the pose is refined.
+#[test]
+fn a_crowded_scan_s_nearly_right_pose_is_refined() {
+    let buf = tiny_db();
+    let db = RefDb::new(buf.bytes()).unwrap();
+    let (truth, mut ranges) = truth_and_scan();
+    // People: every other run of 20 beams (20 degrees) ends 0.7 m away,
+    // about 0.25 m across, in front of the walls.
+    for (k, r) in ranges.iter_mut().enumerate() {
+        if (k / 20) % 2 == 0 && r.is_finite() {
+            *r = r.min(0.7);
+        }
+    }
+    let scan = ranges_scan(&ranges);
+    let mut scratch = vec![0u8; scratch_size(db.params(), scan.len())];
+    let mut loc = crate::Localizer::new(&db, &mut scratch, scan.len()).unwrap();
+    loc.prepare(&scan).unwrap();
+    assert!(loc.crowded());
+    let p = *db.params();
+    let max = |v: &crate::verify::Vicinity| crate::verify::HIT_SCORE * v.pairs as f32;
+    let evidence =
+        |v: &crate::verify::Vicinity| v.evidence(p.verify.short_weight, p.verify.occlusion_fit);
+    let near = Pose2::new(truth.x + 0.12, truth.y - 0.09, truth.theta + 0.05);
+    let before = loc.verify_pose(&near);
+    assert!(
+        evidence(&before) < crate::localize::REFINE_GATE * max(&before),
+        "{before:?}"
+    );
+    assert!(before.score >= crate::localize::CROWDED_REFINE_GATE * max(&before));
+    let (refined, v) = loc.refine_if_promising(near);
+    let err = |q: &Pose2| (q.x - truth.x).hypot(q.y - truth.y);
+    assert!(err(&refined) < 0.5 * err(&near), "{refined:?}");
+    assert!(angle_diff(refined.theta, truth.theta) < 0.01, "{refined:?}");
+    assert!(evidence(&v) > evidence(&before), "{v:?} {before:?}");
+}
+
 /// Each group reads its fields of the params record and writes them back:
 /// a record whose every 4-byte field holds a distinct non-zero value
 /// survives the trip, so no field is left out of a group's `write_record`.
