@@ -2,7 +2,7 @@
 //!
 //! `#![no_std]`, no heap, no I/O. A `.refdb` reference database (built by
 //! `mapc build`) is read from any byte container with [`RefDb::new`]; one
-//! scan is localized with no initial pose by [`localize`], using only a
+//! scan is localized with no initial pose by [`localize()`], using only a
 //! caller-supplied scratch buffer of [`scratch_size`] bytes.
 //!
 //! Pipeline, one module per stage (see `docs/architecture.md`):

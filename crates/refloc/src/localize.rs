@@ -537,6 +537,16 @@ pub const DEEPER_MAX: usize = 40;
 /// reported on other sets (docs/results.md, "A deeper search in a crowd").
 pub const DEEPER_ODDS: f32 = 2.0;
 
+/// Which sites of a new ranking [`Localizer::rank_more`] may append.
+#[derive(Clone, Copy, Debug)]
+enum Appended {
+    /// Its candidates: the N_C rule applied to it (the background pass).
+    Candidates,
+    /// Its first N_C max + this many sites, past the N_C rule (the deeper
+    /// pass).
+    Ranked(usize),
+}
+
 /// What [`Localizer::prepare`] found in the scan.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Prepared {
@@ -765,7 +775,12 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// foreground"). The background histogram replaces the first one in the
     /// scratch. Returns the new N_C (`examined` when nothing is added).
     pub fn rank_background(&mut self, examined: usize) -> usize {
-        self.rank_more(examined, coarse::FOREGROUND_WIDTH, 0, BACKGROUND_MAX)
+        self.rank_more(
+            examined,
+            coarse::FOREGROUND_WIDTH,
+            Appended::Candidates,
+            BACKGROUND_MAX,
+        )
     }
 
     /// True when the prepared scan is crowded: at least [`CROWDED_SHARE`]
@@ -787,7 +802,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// new N_C (`examined` when nothing is added).
     pub fn rank_deeper(&mut self, examined: usize) -> usize {
         let kept = examined.min(self.nc);
-        let nc = self.rank_more(examined, 0.0, DEEPER_MAX, DEEPER_MAX);
+        let nc = self.rank_more(examined, 0.0, Appended::Ranked(DEEPER_MAX), DEEPER_MAX);
         // Confidences are discounted only when there was more to examine.
         self.discount |= nc > kept;
         nc
@@ -807,13 +822,25 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// Ranks the sites again, by the histogram without foreground surfaces
     /// at most `foreground` m across (0 keeps them), keeping the first
     /// `examined` candidates and appending at most `most` sites not among
-    /// them: with `extra` 0 those of the ranking's N_C, else those of its
-    /// first N_C max + `extra` sites. Returns the new N_C.
-    fn rank_more(&mut self, examined: usize, foreground: f32, extra: usize, most: usize) -> usize {
+    /// them, taken from the new ranking as `from` says. Returns the new N_C.
+    fn rank_more(
+        &mut self,
+        examined: usize,
+        foreground: f32,
+        from: Appended,
+        most: usize,
+    ) -> usize {
         let kept = examined.min(self.nc);
         self.histogram_with(foreground);
+        let extra = match from {
+            Appended::Candidates => 0,
+            Appended::Ranked(extra) => extra,
+        };
         let (ranked, nc) = self.rank_into(kept, extra);
-        let take = if extra == 0 { nc } else { ranked };
+        let take = match from {
+            Appended::Candidates => nc,
+            Appended::Ranked(_) => ranked,
+        };
         let (first, rest) = self.b.top.split_at_mut(kept);
         let mut added = 0;
         for j in 0..take {

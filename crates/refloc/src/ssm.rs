@@ -694,7 +694,8 @@ fn tangent_turn(u: [f32; 2], v: [f32; 2]) -> [f32; 2] {
 /// [`pair_deformation`] of two correspondences that share no point, from
 /// `dq` (the input pair's difference, `p_j - p_i`), `dr` (the reference
 /// pair's, `r_j' - r_i'`) and `turns`, the sum of both correspondences'
-/// [`tangent_turn`]s. Each of the chord's two sides is
+/// tangent turns (the cosine and sine of the turn from the input point's
+/// tangent to the reference point's). Each of the chord's two sides is
 /// `(u . dq)(v . dr) + (u x dq)(v x dr)` = `Re[conj(u) v dq conj(dr)]`, so
 /// their sum is `Re[turns * dq conj(dr)]`: a few products per pair instead
 /// of four tangent reads and two sides.
