@@ -220,7 +220,10 @@ pub struct Hypothesis {
 /// The answer for one scan.
 #[derive(Clone, Copy, Debug)]
 pub struct Localization<'s> {
-    /// Robot pose in the map frame (m, m, rad).
+    /// Robot pose in the map frame (m, m, rad): the chosen candidate's,
+    /// or that pose slid along its corridor when it fits better there
+    /// ([`refine::slide`]; the candidate's record keeps the matched pose,
+    /// and the first hypothesis carries this one).
     pub pose: Pose2,
     /// Sensor pose in the map frame.
     pub sensor_pose: Pose2,
@@ -1079,6 +1082,41 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         skew
     }
 
+    /// The answer's pose slid along its corridor ([`refine::slide`]) when
+    /// that fits the scan better both by the refinement's cost and by the
+    /// verification's evidence (robot pose, map frame; the scan's `skew`
+    /// (rad) as fitted for the answer); `None` keeps the candidate's. Only
+    /// the reported pose moves: the candidate's record, its evidence and
+    /// the confidence stay those of the matched pose, which the model was
+    /// fitted on, so the decision is the same.
+    fn slide(&self, best: usize, skew: f32) -> Option<Pose2> {
+        let p = self.params;
+        let c = self.b.cands.get(best).filter(|c| c.has_pose != 0)?;
+        if p.refine.refine_iters == 0 {
+            return None;
+        }
+        let sensor = Pose2::new(c.x, c.y, c.theta).compose(&p.sensor.offset);
+        let slid = refine::slide(
+            &self.dm,
+            &self.b.in_pts[..self.scan.beams],
+            sensor,
+            p.refine.refine_iters,
+            p.refine.refine_max_dist,
+        )?;
+        // The cost counts points near any surface; the evidence also
+        // charges beams that end short of the map or pass through it, so
+        // clutter that happens to lie on a wall at the slid pose does not
+        // carry it.
+        let v = self.verify_pose_skewed(&slid, skew);
+        if !(v.evidence(p.verify.short_weight, p.verify.occlusion_fit) > c.evidence) {
+            return None;
+        }
+        let robot = slid.compose(&p.sensor.offset.inverse());
+        self.prior
+            .is_none_or(|pr| pr.allows(&robot))
+            .then_some(robot)
+    }
+
     /// The confidence's spread feature ([`Candidate::spread`]) of a sensor
     /// pose.
     pub fn spread_at(&self, sensor: &Pose2) -> f32 {
@@ -1156,9 +1194,10 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         } else {
             self.fit_skew(best)
         };
+        let slid = self.slide(best, skew);
         let cands: &'s [Candidate] = &self.b.cands[..nc];
         let c = cands[best];
-        let pose = Pose2::new(c.x, c.y, c.theta);
+        let pose = slid.unwrap_or(Pose2::new(c.x, c.y, c.theta));
         let p = self.params;
         let ambiguous = select::ambiguous(cands, &c, p.select.ambiguity_ratio);
         let model = self.db.decision();
@@ -1171,6 +1210,9 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         }
         let confidence = select::capped_confidence(hypotheses[0].confidence, ambiguous);
         hypotheses[0].confidence = confidence;
+        if hypothesis_count > 0 {
+            hypotheses[0].pose = pose;
+        }
         let accepted = match model {
             Some(m) => select::accepted_with(&c, confidence, &m),
             None => select::accepted(&c, ambiguous),

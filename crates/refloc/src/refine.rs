@@ -527,6 +527,65 @@ pub fn refine_skew(
     .0
 }
 
+/// Offsets (m) along a fit's weakest direction that [`slide`] tries: up
+/// to 0.9 m each way, under the 1 m that makes two poses distinct
+/// hypotheses ([`crate::select::DISTINCT_DISTANCE`]), so a slid answer
+/// stays the hypothesis whose confidence was computed.
+pub const SLIDE_OFFSETS: [f32; 8] = [-0.9, -0.6, -0.4, -0.2, 0.2, 0.4, 0.6, 0.9];
+
+/// Unit vector (map frame) of the position direction the normal
+/// equations pin least: the eigenvector of the smallest eigenvalue of the
+/// x-y block of `J^T W J` (a corridor's axis). `None` when it is not
+/// defined (no points, or not finite).
+fn weak_direction(ne: &NormalEquations) -> Option<[f32; 2]> {
+    let (a, b, d) = (ne.h[0][0], ne.h[0][1], ne.h[1][1]);
+    let half = 0.5 * (a - d);
+    let low = 0.5 * (a + d) - libm::sqrtf(half * half + b * b);
+    // (h - low I) v = 0 has the solutions (b, low - a) and (low - d, b);
+    // the longer of the two is the better conditioned.
+    let (v1, v2) = ([b, low - a], [low - d, b]);
+    let v = if v1[0] * v1[0] + v1[1] * v1[1] >= v2[0] * v2[0] + v2[1] * v2[1] {
+        v1
+    } else {
+        v2
+    };
+    let n = libm::sqrtf(v[0] * v[0] + v[1] * v[1]);
+    (n > 1e-9 && n.is_finite()).then(|| [v[0] / n, v[1] / n])
+}
+
+/// Slides a fitted sensor pose (map frame) along its fit's weakest
+/// direction (the position direction the fit pins least: a corridor's
+/// axis): the robust cost ([`refine`]'s) at each of [`SLIDE_OFFSETS`],
+/// then [`refine`] from the lowest when it is below the pose's own. Returns the refined pose when its cost is lower than
+/// `pose`'s, else `None`. A refinement from the matched pose stops in the
+/// nearest minimum of its cost, and along a corridor the nearest can be
+/// tens of centimetres from the deepest: the door frames and ends that
+/// place the scan along it pull only from close by.
+pub fn slide(
+    dm: &DistMap<'_>,
+    pts: &[[f32; 2]],
+    pose: Pose2,
+    iters: u32,
+    max_dist: f32,
+) -> Option<Pose2> {
+    let (c0, ne) = cost_and_normal_equations(dm, pts, &pose, max_dist);
+    let dir = weak_direction(&ne)?;
+    let at = |t: f32| Pose2::new(pose.x + t * dir[0], pose.y + t * dir[1], pose.theta);
+    let mut best = (c0, 0.0f32);
+    for &t in SLIDE_OFFSETS.iter() {
+        let c = cost_and_normal_equations(dm, pts, &at(t), max_dist).0;
+        if c < best.0 {
+            best = (c, t);
+        }
+    }
+    if best.1 == 0.0 {
+        return None;
+    }
+    let (p1, _, _) = refine_fit(dm, pts, at(best.1), iters, max_dist);
+    let c1 = cost_and_normal_equations(dm, pts, &p1, max_dist).0;
+    (c1 < c0).then_some(p1)
+}
+
 /// The robust cost ([`refine`]'s) of the points at `pose` with no skew,
 /// then [`refine_skew`] from there and the cost at its result: (skewed
 /// pose, skew (rad), rigid cost, skewed cost). The ratio of the two costs
@@ -755,6 +814,92 @@ mod tests {
         let side: Vec<[f32; 2]> = pts.iter().copied().filter(|p| p[1].abs() > 1.4).collect();
         let c = position_spread(&dm(&corridor, frame), &side, &centre, 0.3, 0.0144);
         assert!(c.is_none_or(|c| c > 10.0 * r), "{c:?} vs {r}");
+    }
+
+    /// A corridor 5 m long and 2 m wide at 0.05 m (100 x 40 cells), open
+    /// at both ends, with two pillars of 0.1 x 0.2 m standing on its walls
+    /// at x = 2.0 m (top) and x = 3.5 m (bottom): the only things that
+    /// place a scan along it. Encoded as the compiler does (the distance
+    /// between cell centres less half a cell, to the nearest wall cell).
+    fn corridor_with_pillars() -> Vec<u8> {
+        let (w, h) = (100i32, 40i32);
+        let wall = |x: i32, y: i32| {
+            y == 0
+                || y == h - 1
+                || ((40..=41).contains(&x) && y >= 35)
+                || ((70..=71).contains(&x) && y <= 4)
+        };
+        let cells: Vec<(i32, i32)> = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .filter(|&(x, y)| wall(x, y))
+            .collect();
+        let mut out = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                let d = cells
+                    .iter()
+                    .map(|&(a, b)| (((a - x) * (a - x) + (b - y) * (b - y)) as f32).sqrt())
+                    .fold(f32::INFINITY, f32::min);
+                out.push(dist_encode(if wall(x, y) { -0.5 } else { d - 0.5 }));
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_pose_off_along_a_corridor_slides_to_the_pillars_that_place_it() {
+        let frame = MapFrame {
+            resolution: 0.05,
+            origin: Pose2::new(0.0, 0.0, 0.0),
+        };
+        let data = corridor_with_pillars();
+        let dm = DistMap::new(100, 40, &data, frame);
+        // The scan from (2.5, 1.0), heading 0: the walls' inner faces
+        // (y = 0.05 and 1.95) where no pillar stands, and the pillars'
+        // faces, in the sensor frame.
+        let truth = Pose2::new(2.5, 1.0, 0.0);
+        let mut map_pts = Vec::new();
+        for k in 0..41 {
+            let x = 0.5 + 0.1 * k as f32;
+            if !(1.95..=2.15).contains(&x) {
+                map_pts.push([x, 1.95]);
+            }
+            if !(3.45..=3.65).contains(&x) {
+                map_pts.push([x, 0.05]);
+            }
+        }
+        for k in 0..5 {
+            let t = 0.05 * k as f32;
+            map_pts.extend([
+                [2.0, 1.75 + t],
+                [2.1, 1.75 + t],
+                [3.5, 0.05 + t],
+                [3.6, 0.05 + t],
+            ]);
+        }
+        map_pts.extend([[2.05, 1.75], [3.55, 0.25]]);
+        let pts: Vec<[f32; 2]> = map_pts
+            .iter()
+            .map(|p| [p[0] - truth.x, p[1] - truth.y])
+            .collect();
+        // Matched 0.5 m along the corridor: the pillars' points lie over
+        // 0.3 m from any surface, so the refinement alone stays there.
+        let off = Pose2::new(3.0, 1.02, 0.01);
+        let refined = super::refine(&dm, &pts, off, 10, 0.3).0;
+        assert!((refined.x - truth.x).abs() > 0.4, "{refined:?}");
+        let slid =
+            super::slide(&dm, &pts, refined, 10, 0.3).expect("a better fit along the corridor");
+        assert!(
+            (slid.x - truth.x).abs() < 0.03
+                && (slid.y - truth.y).abs() < 0.03
+                && slid.theta.abs() < 0.01,
+            "{slid:?}"
+        );
+        // At the right pose there is nothing better to slide to.
+        let right = super::refine(&dm, &pts, truth, 10, 0.3).0;
+        assert!(
+            super::slide(&dm, &pts, right, 10, 0.3).is_none_or(|p| (p.x - right.x).abs() < 0.02)
+        );
     }
 
     /// An 80 x 80 grid at 0.05 m with walls five cells thick all round:
