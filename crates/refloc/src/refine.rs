@@ -760,6 +760,14 @@ mod tests {
     use crate::format::dist_encode;
     use crate::{MapFrame, Pose2};
 
+    /// The frame of the test grids: 0.05 m cells, origin at (0, 0).
+    fn frame_05() -> MapFrame {
+        MapFrame {
+            resolution: 0.05,
+            origin: Pose2::new(0.0, 0.0, 0.0),
+        }
+    }
+
     /// A 60 x 60 grid at 0.05 m whose border cells are walls on the sides
     /// `walls` names (left, right, bottom, top), as the compiler encodes it:
     /// the distance between cell centres less half a cell.
@@ -791,10 +799,7 @@ mod tests {
 
     #[test]
     fn walls_all_round_pin_the_position_and_a_corridor_does_not() {
-        let frame = MapFrame {
-            resolution: 0.05,
-            origin: Pose2::new(0.0, 0.0, 0.0),
-        };
+        let frame = frame_05();
         fn dm(data: &[u8], frame: MapFrame) -> DistMap<'_> {
             DistMap::new(60, 60, data, frame)
         }
@@ -848,10 +853,7 @@ mod tests {
 
     #[test]
     fn a_pose_off_along_a_corridor_slides_to_the_pillars_that_place_it() {
-        let frame = MapFrame {
-            resolution: 0.05,
-            origin: Pose2::new(0.0, 0.0, 0.0),
-        };
+        let frame = frame_05();
         let data = corridor_with_pillars();
         let dm = DistMap::new(100, 40, &data, frame);
         // The scan from (2.5, 1.0), heading 0: the walls' inner faces
@@ -936,10 +938,7 @@ mod tests {
 
     #[test]
     fn the_skew_of_a_turning_scanner_is_fitted_and_a_still_one_has_none() {
-        let frame = MapFrame {
-            resolution: 0.05,
-            origin: Pose2::new(0.0, 0.0, 0.0),
-        };
+        let frame = frame_05();
         let room = thick_room();
         let dm = DistMap::new(80, 80, &room, frame);
         let centre = Pose2::new(2.0, 2.0, 0.0);
