@@ -1067,15 +1067,9 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         if skew == 0.0 || !(cost <= SKEW_COST_RATIO * rigid_cost) {
             return 0.0;
         }
-        let robot = fitted.compose(&p.sensor.offset.inverse());
-        if self.prior.is_some_and(|pr| !pr.allows(&robot)) {
+        let Some((robot, v)) = self.improves(&c, &fitted, skew) else {
             return 0.0;
-        }
-        let v = self.verify_pose_skewed(&fitted, skew);
-        let evidence = v.evidence(p.verify.short_weight, p.verify.occlusion_fit);
-        if !(evidence > c.evidence) {
-            return 0.0;
-        }
+        };
         refine::deskew(&mut self.b.in_pts[..n], skew);
         let spread = self.spread_at(&fitted);
         self.b.cands[best] = placed(c, &robot, &v, spread, p);
@@ -1107,14 +1101,26 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         // charges beams that end short of the map or pass through it, so
         // clutter that happens to lie on a wall at the slid pose does not
         // carry it.
-        let v = self.verify_pose_skewed(&slid, skew);
-        if !(v.evidence(p.verify.short_weight, p.verify.occlusion_fit) > c.evidence) {
+        self.improves(c, &slid, skew).map(|(robot, _)| robot)
+    }
+
+    /// Whether another sensor pose (map frame) for candidate `c`, the scan
+    /// taken with `skew` (rad), is better than `c`'s own: inside the prior
+    /// and with more evidence. Then its robot pose and its vicinity.
+    fn improves(
+        &self,
+        c: &Candidate,
+        sensor: &Pose2,
+        skew: f32,
+    ) -> Option<(Pose2, verify::Vicinity)> {
+        let p = self.params;
+        let robot = sensor.compose(&p.sensor.offset.inverse());
+        if self.prior.is_some_and(|pr| !pr.allows(&robot)) {
             return None;
         }
-        let robot = slid.compose(&p.sensor.offset.inverse());
-        self.prior
-            .is_none_or(|pr| pr.allows(&robot))
-            .then_some(robot)
+        let v = self.verify_pose_skewed(sensor, skew);
+        (v.evidence(p.verify.short_weight, p.verify.occlusion_fit) > c.evidence)
+            .then_some((robot, v))
     }
 
     /// The confidence's spread feature ([`Candidate::spread`]) of a sensor

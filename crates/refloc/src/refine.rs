@@ -539,8 +539,7 @@ pub const SLIDE_OFFSETS: [f32; 8] = [-0.9, -0.6, -0.4, -0.2, 0.2, 0.4, 0.6, 0.9]
 /// defined (no points, or not finite).
 fn weak_direction(ne: &NormalEquations) -> Option<[f32; 2]> {
     let (a, b, d) = (ne.h[0][0], ne.h[0][1], ne.h[1][1]);
-    let half = 0.5 * (a - d);
-    let low = 0.5 * (a + d) - libm::sqrtf(half * half + b * b);
+    let (low, _) = sym2_eigenvalues(a, b, d);
     // (h - low I) v = 0 has the solutions (b, low - a) and (low - d, b);
     // the longer of the two is the better conditioned.
     let (v1, v2) = ([b, low - a], [low - d, b]);
@@ -556,8 +555,9 @@ fn weak_direction(ne: &NormalEquations) -> Option<[f32; 2]> {
 /// Slides a fitted sensor pose (map frame) along its fit's weakest
 /// direction (the position direction the fit pins least: a corridor's
 /// axis): the robust cost ([`refine`]'s) at each of [`SLIDE_OFFSETS`],
-/// then [`refine`] from the lowest when it is below the pose's own. Returns the refined pose when its cost is lower than
-/// `pose`'s, else `None`. A refinement from the matched pose stops in the
+/// then [`refine`] from the lowest when it is below the pose's own.
+/// Returns the refined pose when its cost is lower than `pose`'s, else
+/// `None`. A refinement from the matched pose stops in the
 /// nearest minimum of its cost, and along a corridor the nearest can be
 /// tens of centimetres from the deepest: the door frames and ends that
 /// place the scan along it pull only from close by.
@@ -720,12 +720,18 @@ pub fn position_spread(
 /// [`position_spread`] from the normal equations at the pose.
 fn spread_of(ne: &NormalEquations, floor_m: f32) -> Option<f32> {
     let c = covariance_of(ne, floor_m)?;
-    // Largest eigenvalue of the symmetric 2x2 block [[a, b], [b, d]].
-    let (a, b, d) = (c[0], c[1], c[4]);
-    let half = 0.5 * (a - d);
-    let top = 0.5 * (a + d) + libm::sqrtf(half * half + b * b);
+    // Largest eigenvalue of the position block.
+    let (_, top) = sym2_eigenvalues(c[0], c[1], c[4]);
     let spread = libm::sqrtf(top * ne.n as f32);
     spread.is_finite().then_some(spread)
+}
+
+/// The eigenvalues (smallest, largest) of the symmetric 2x2 matrix
+/// `[[a, b], [b, d]]`.
+fn sym2_eigenvalues(a: f32, b: f32, d: f32) -> (f32, f32) {
+    let half = 0.5 * (a - d);
+    let (mid, r) = (0.5 * (a + d), libm::sqrtf(half * half + b * b));
+    (mid - r, mid + r)
 }
 
 /// Solves the 3x3 system `h x = g` (Cramer's rule); `None` when singular.
