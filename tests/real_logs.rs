@@ -261,14 +261,18 @@ fn csail_log_against_csail_map() {
 /// (2026-12-06, sixth session): Intel 81.3% / 3.8%, ACES 76.1% / 3.4%
 /// (one scan more of 88), candidates Intel 16, ACES 19. The bounds leave a
 /// few scans of slack, except ACES's false accepts: 3 of 88 against a bound
-/// of 3.5%, so one more fails it (kept: the whole log stays at 1.8%). Both logs were
+/// of 3.5%, so one more fails it (kept: the whole log stays at 1.8%). With the
+/// slide along the corridor (fourteenth session) these scans give Intel
+/// 84.1% / 3.3% and ACES 78.4% / 3.4%, and the accepted-and-correct bounds
+/// were raised from 78% and 72% to 81% and 75% (fifteenth session): five
+/// and three scans of slack, as the others. Both logs were
 /// used to fit the decision model (docs/confidence.md), so these guard
 /// against regressions; they are not held-out figures.
 #[test]
 fn intel_and_aces_logs_do_not_regress() {
     if let Some(r) = real_log("intel", 180, 5) {
         assert!(
-            r.correct_c >= 0.78,
+            r.correct_c >= 0.81,
             "Intel accepted and correct {}",
             r.correct_c
         );
@@ -278,7 +282,7 @@ fn intel_and_aces_logs_do_not_regress() {
     }
     if let Some(r) = real_log("aces", 180, 5) {
         assert!(
-            r.correct_c >= 0.72,
+            r.correct_c >= 0.75,
             "ACES accepted and correct {}",
             r.correct_c
         );
