@@ -10,6 +10,7 @@ pub mod gvd;
 pub mod index;
 pub mod mapfile;
 pub mod pipeline;
+pub mod reach;
 pub mod rng;
 pub mod sim;
 pub mod sites;

@@ -144,6 +144,15 @@ pub struct Args {
     /// Leave the candidate list out of the JSON output.
     #[arg(long)]
     pub no_candidates: bool,
+    /// Localize scans of a short-reach sensor (under half the database's
+    /// reference reach) on the database's own reference scans. Without it
+    /// they are localized on reference scans made again for their reach
+    /// (rounded down to 0.1 m) from the database (`mapc::compiler::reach`,
+    /// well under a second for the shared maps, once per run and reach), as
+    /// a database built with `--range-max` for that sensor stores them;
+    /// either way every candidate is examined.
+    #[arg(long)]
+    pub database_reach: bool,
     /// Prior region: the robot is within R m of (X, Y) (map frame); sites
     /// outside it (plus 2 m) are not ranked, poses outside it are no answer.
     #[arg(long, value_name = "X,Y,R", allow_hyphen_values = true)]
@@ -500,6 +509,7 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
         scratch: Vec::new(),
         rec,
         tally: Tally::default(),
+        derived: Vec::new(),
     };
     if text {
         out.line(&format!(
@@ -542,6 +552,20 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
     })
 }
 
+/// `db` with its reference side made again for a sensor reaching `reach_m`
+/// (`mapc::compiler::reach::derive_for_reach`, every early stop off), in
+/// memory; the error says why it could not be made.
+fn derive_db(db: &refloc::RefDb<DbBytes>, reach_m: f32) -> Result<refloc::RefDb<DbBytes>, String> {
+    let fail = |e: String| format!("reference scans for a {reach_m:.1} m reach: {e}");
+    let sections = mapc::compiler::reach::derive_for_reach(db, reach_m, true)
+        .map_err(|e| fail(e.to_string()))?;
+    let bytes = mapc::compiler::reach::encode_sections(&sections);
+    let len = bytes.len();
+    let mut words = vec![0u32; len.div_ceil(4)];
+    zerocopy::IntoBytes::as_mut_bytes(&mut words[..])[..len].copy_from_slice(&bytes);
+    refloc::RefDb::new(DbBytes::Owned { words, len }).map_err(|e| fail(e.to_string()))
+}
+
 /// `--truth`: the given robot poses by scan index (none without it).
 fn read_truth(a: &Args) -> Result<HashMap<usize, [f64; 3]>, CliError> {
     Ok(match &a.truth {
@@ -575,6 +599,22 @@ struct Session {
     scratch: Vec<u8>,
     rec: Option<Recorder>,
     tally: Tally,
+    /// Databases derived for a shorter reach (`mapc::compiler::reach`), by
+    /// the reach in decimetres ([`derived_reach_dm`]); `None` where the
+    /// derivation failed (the database's own is used). At most
+    /// [`MAX_DERIVED`], the oldest dropped first.
+    derived: Vec<(u32, Option<refloc::RefDb<DbBytes>>)>,
+}
+
+/// Most databases derived for other reaches a run keeps at once (each is
+/// about the database's size in memory).
+const MAX_DERIVED: usize = 4;
+
+/// The reach (decimetres) of the reference scans made for a scan reaching
+/// `reach` m: rounded down to 0.1 m, so that a run whose scans state many
+/// slightly different reaches derives a few sets, not one per scan.
+fn derived_reach_dm(reach: f32) -> u32 {
+    (reach * 10.0 + 1e-3).floor().clamp(0.0, u32::MAX as f32) as u32
 }
 
 impl Session {
@@ -586,19 +626,10 @@ impl Session {
         k: usize,
         scan: &scanio::InputScan,
     ) -> Result<String, CliError> {
-        let db = map.db;
-        grow_scratch(&mut self.scratch, db.params(), scan.data.len());
-        let input = scan.data.as_scan();
-        let t0 = Instant::now();
-        let r = refloc::localize_with_prior(db, &input, &mut self.scratch, map.prior);
-        let time_us = t0.elapsed().as_micros() as u64;
-        if let Some(rec) = self.rec.as_mut() {
-            rec.record(db, k, scan, &r)?;
-        }
-        self.tally.times.push(time_us as f64);
         let reach = scan.data.range_max();
-        let reference = db.params().sensor.range_max;
-        if reach < refloc::localize::SHORT_REACH * reference {
+        let reference = map.db.params().sensor.range_max;
+        let short = reach < refloc::localize::SHORT_REACH * reference;
+        if short {
             let t = &mut self.tally;
             t.shortest_reach = if t.short_reach == 0 {
                 reach
@@ -608,6 +639,41 @@ impl Session {
             t.short_reach += 1;
             t.reference_reach = reference;
         }
+        let db = if short && !map.a.database_reach {
+            let key = derived_reach_dm(reach);
+            let i = match self.derived.iter().position(|(k, _)| *k == key) {
+                Some(i) => i,
+                None => {
+                    if self.derived.len() >= MAX_DERIVED {
+                        self.derived.remove(0);
+                    }
+                    let made = derive_db(map.db, key as f32 / 10.0);
+                    if let Err(e) = &made {
+                        self.tally.derive_failed = Some(e.to_string());
+                    }
+                    self.derived.push((key, made.ok()));
+                    self.derived.len() - 1
+                }
+            };
+            match &self.derived[i].1 {
+                Some(d) => {
+                    self.tally.derived += 1;
+                    d
+                }
+                None => map.db,
+            }
+        } else {
+            map.db
+        };
+        grow_scratch(&mut self.scratch, db.params(), scan.data.len());
+        let input = scan.data.as_scan();
+        let t0 = Instant::now();
+        let r = refloc::localize_with_prior(db, &input, &mut self.scratch, map.prior);
+        let time_us = t0.elapsed().as_micros() as u64;
+        if let Some(rec) = self.rec.as_mut() {
+            rec.record(db, k, scan, &r)?;
+        }
+        self.tally.times.push(time_us as f64);
         let judged = map.judge(k, scan);
         Ok(match r {
             Ok(l) => {
@@ -868,6 +934,12 @@ struct Tally {
     shortest_reach: f32,
     /// The database's reference range (m).
     reference_reach: f32,
+    /// Of those, the scans localized on reference scans made for their
+    /// reach (not `--database-reach`).
+    derived: usize,
+    /// Why reference scans for some reach could not be made (those scans
+    /// were localized on the database's own).
+    derive_failed: Option<String>,
 }
 
 impl Tally {
@@ -926,7 +998,21 @@ impl Tally {
             self.accepted,
             med_t / 1000.0
         );
-        if self.short_reach > 0 {
+        if let Some(e) = &self.derive_failed {
+            eprintln!(
+                "warning: {e}; those scans were localized on the database's own reference scans"
+            );
+        }
+        if self.derived > 0 {
+            eprintln!(
+                "note: {} scans come from a sensor that reaches {:.1} m or less, under half the {:.1} m of the database's reference scans: {} were localized on reference scans made again for their reach from the database (`--database-reach` uses its own); `mapc build --range-max {:.1}` stores them (docs/robot.md, \"Sensor reach\")",
+                self.short_reach,
+                self.shortest_reach,
+                self.reference_reach,
+                self.derived,
+                self.shortest_reach
+            );
+        } else if self.short_reach > 0 {
             eprintln!(
                 "note: {} scans come from a sensor that reaches {:.1} m or less, under half the {:.1} m of the database's reference scans: every candidate is examined for them (slower), and a database built for that sensor answers them better: `mapc build --range-max {:.1}` (docs/robot.md, \"Sensor reach\")",
                 self.short_reach,
@@ -968,5 +1054,21 @@ impl Tally {
             "  of the false accepts, {} have a given truth that, refined against the map (search within 0.5 m and 15 deg of the truth pose, then robust Gauss-Newton), lands within 0.3 m / 5 deg of the estimate",
             self.false_acc_truth_refines_to_ours
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::derived_reach_dm;
+
+    #[test]
+    fn a_derived_reach_is_the_scans_rounded_down_to_a_decimetre() {
+        assert_eq!(derived_reach_dm(4.0), 40);
+        assert_eq!(derived_reach_dm(3.5), 35);
+        assert_eq!(derived_reach_dm(5.6), 56);
+        assert_eq!(derived_reach_dm(5.69), 56);
+        assert_eq!(derived_reach_dm(0.05), 0);
+        assert_eq!(derived_reach_dm(f32::NAN), 0);
+        assert_eq!(derived_reach_dm(-3.0), 0);
     }
 }

@@ -1,8 +1,9 @@
 use super::*;
 use crate::compiler::mapfile::OccupancyGrid;
 
-/// A walled 60 x 40 room with a pillar, at `resolution` m per cell.
-fn room(resolution: f64) -> MapSource {
+/// A walled 60 x 40 room with a pillar, at `resolution` m per cell (also
+/// the derived-reach tests' map).
+pub(crate) fn room(resolution: f64) -> MapSource {
     let rows: Vec<String> = (0..40)
         .map(|y| {
             (0..60)
