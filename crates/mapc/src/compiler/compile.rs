@@ -47,6 +47,10 @@ pub struct CompileInput<'a> {
     /// Squared distance (cells^2) from each cell centre to the nearest
     /// beam-stopping cell centre.
     pub sq_dist: &'a [f32],
+    /// The distance map section ready made (a database's own, when its
+    /// reference side is made again: `crate::compiler::reach`), one byte
+    /// per cell; `None` computes it from `sq_dist` and the grid.
+    pub dist: Option<&'a [u8]>,
     /// Whether unknown cells stop beams.
     pub unknown_blocks: bool,
     /// Free cells in the source map.
@@ -398,7 +402,9 @@ pub fn compile_with(
     let frame = input.frame;
     // The distance map first, before any per-site data exists: its distance
     // transform needs 12 bytes per cell while it runs (peak memory).
-    let dist_bytes = {
+    let dist_bytes = if let Some(d) = input.dist {
+        d.to_vec()
+    } else {
         let bits = grid;
         let (w, h) = (input.width as usize, input.height as usize);
         let sq_in = crate::compiler::edt::squared_edt(w, h, |i| {

@@ -423,6 +423,7 @@ pub fn build(src: &MapSource, cfg: &BuildConfig) -> Result<BuildOutput, BuildErr
         frame: grid.frame(),
         blocked: &blocked,
         sq_dist: &df.sq,
+        dist: None,
         unknown_blocks: cfg.unknown_blocks,
         free_cells: grid.free_count() as u64,
         params,

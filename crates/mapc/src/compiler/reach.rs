@@ -103,6 +103,7 @@ pub fn derive_for_reach<D: AsRef<[u8]>>(
         frame,
         blocked: &blocked,
         sq_dist: &sq_dist,
+        dist: Some(db.section(SectionKind::Dist)),
         unknown_blocks: meta.unknown_blocks.get() != 0,
         free_cells: meta.free_cells.get(),
         params,
@@ -115,11 +116,6 @@ pub fn derive_for_reach<D: AsRef<[u8]>>(
         scans,
         ..
     } = compile::compile(&input, &sites)?;
-    for (kind, bytes) in sections.iter_mut() {
-        if *kind == SectionKind::Dist {
-            *bytes = db.section(SectionKind::Dist).to_vec();
-        }
-    }
     let decision = db.section(SectionKind::Decision);
     if !decision.is_empty() {
         sections.push((SectionKind::Decision, decision.to_vec()));
