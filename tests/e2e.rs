@@ -57,6 +57,17 @@ fn built(dir: &Path, extra: &[&str]) -> PathBuf {
 /// `mapc eval` of `db` on 60 static poses (seed 3) into `out`, checked
 /// against the `check` baseline report when given.
 fn eval_static(db: &Path, out: &Path, check: Option<&Path>, cwd: &Path) -> Output {
+    eval_static_with(db, out, check, &[], cwd)
+}
+
+/// [`eval_static`] with `extra` options (the simulated sensor, `--dump`).
+fn eval_static_with(
+    db: &Path,
+    out: &Path,
+    check: Option<&Path>,
+    extra: &[&str],
+    cwd: &Path,
+) -> Output {
     let mut args = vec![
         "eval",
         db.to_str().unwrap(),
@@ -73,6 +84,7 @@ fn eval_static(db: &Path, out: &Path, check: Option<&Path>, cwd: &Path) -> Outpu
     if let Some(c) = check {
         args.extend(["--check", c.to_str().unwrap()]);
     }
+    args.extend_from_slice(extra);
     mapc(&args, cwd)
 }
 
@@ -822,24 +834,11 @@ fn short_reach_scans_use_reference_scans_made_for_their_reach() {
     );
     assert!(o.status.success(), "{}", text(&o));
     let dump = dir.path().join("dump");
-    let o = mapc(
-        &[
-            "eval",
-            dbp.to_str().unwrap(),
-            "--experiments",
-            "static",
-            "--poses",
-            "60",
-            "--seed",
-            "3",
-            "--range-max",
-            "4",
-            "--dump",
-            dump.to_str().unwrap(),
-            "--out",
-            dump.join("report").to_str().unwrap(),
-            "--no-figures",
-        ],
+    let o = eval_static_with(
+        &dbp,
+        &dump.join("report"),
+        None,
+        &["--range-max", "4", "--dump", dump.to_str().unwrap()],
         dir.path(),
     );
     assert!(o.status.success(), "{}", text(&o));

@@ -40,12 +40,26 @@ fn size_of_build(out: &BuildOutput, features: bool) -> compile::DbSize {
     compile::db_size(&out.params, 60, 40, out.sites.len(), links, features)
 }
 
-/// The bytes of a build's section `k` (empty when it has none).
-fn section_of(out: &BuildOutput, k: SectionKind) -> &[u8] {
-    out.sections
+/// The bytes of section `k` among `sections` (empty when there is none).
+pub(crate) fn section(sections: &[(SectionKind, Vec<u8>)], k: SectionKind) -> &[u8] {
+    sections
         .iter()
         .find(|(kind, _)| *kind == k)
         .map_or(&[], |(_, b)| b.as_slice())
+}
+
+/// The bytes of a build's section `k` (empty when it has none).
+fn section_of(out: &BuildOutput, k: SectionKind) -> &[u8] {
+    section(&out.sections, k)
+}
+
+/// The database `sections` make, as a 4-byte aligned copy (the reader
+/// needs aligned arrays) and its length in bytes.
+pub(crate) fn image(sections: &[(SectionKind, Vec<u8>)]) -> (Vec<u32>, usize) {
+    let bytes = crate::compiler::reach::encode_sections(sections);
+    let mut words = vec![0u32; bytes.len().div_ceil(4)];
+    zerocopy::IntoBytes::as_mut_bytes(&mut words[..])[..bytes.len()].copy_from_slice(&bytes);
+    (words, bytes.len())
 }
 
 #[test]
@@ -101,22 +115,8 @@ fn stored_features_are_the_runtimes_and_change_no_answer() {
             .collect::<Vec<_>>()
     };
     assert_eq!(others(&with), others(&without));
-    let image = |o: &BuildOutput| {
-        let refs: Vec<(SectionKind, &[u8])> =
-            o.sections.iter().map(|(k, b)| (*k, b.as_slice())).collect();
-        let mut out = Vec::new();
-        refloc::format::encode(&refs, |b: &[u8]| -> Result<(), ()> {
-            out.extend_from_slice(b);
-            Ok(())
-        })
-        .unwrap();
-        // A u32-backed copy: the reader needs 4-byte aligned arrays.
-        let mut words = vec![0u32; out.len().div_ceil(4)];
-        zerocopy::IntoBytes::as_mut_bytes(&mut words[..])[..out.len()].copy_from_slice(&out);
-        (words, out.len())
-    };
-    let (wa, la) = image(&with);
-    let (wb, lb) = image(&without);
+    let (wa, la) = image(&with.sections);
+    let (wb, lb) = image(&without.sections);
     let a = refloc::RefDb::new(&zerocopy::IntoBytes::as_bytes(&wa[..])[..la]).unwrap();
     let b = refloc::RefDb::new(&zerocopy::IntoBytes::as_bytes(&wb[..])[..lb]).unwrap();
     a.verify().unwrap();

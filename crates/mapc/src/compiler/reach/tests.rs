@@ -1,26 +1,12 @@
 use super::*;
 use crate::compiler::mapfile::MapSource;
+use crate::compiler::pipeline::tests::{image, section};
 use crate::compiler::pipeline::{build, BuildConfig};
 
 /// The pipeline tests' walled room with a pillar, 6 x 4 m at 0.1 m per
 /// cell: from most sites some walls lie beyond a 2.5 m reach.
 fn room() -> MapSource {
     crate::compiler::pipeline::tests::room(0.1)
-}
-
-/// A 4-byte aligned copy of the database `sections` make.
-fn image(sections: &[(SectionKind, Vec<u8>)]) -> (Vec<u32>, usize) {
-    let bytes = encode_sections(sections);
-    let mut words = vec![0u32; bytes.len().div_ceil(4)];
-    zerocopy::IntoBytes::as_mut_bytes(&mut words[..])[..bytes.len()].copy_from_slice(&bytes);
-    (words, bytes.len())
-}
-
-fn section(sections: &[(SectionKind, Vec<u8>)], k: SectionKind) -> &[u8] {
-    sections
-        .iter()
-        .find(|(kind, _)| *kind == k)
-        .map_or(&[], |(_, b)| b.as_slice())
 }
 
 #[test]
