@@ -25,8 +25,8 @@ centre that is not free; headings uniformly.
 
 Classes (each scan independently, from the same seed):
   static         exact ranges
-  noise          range noise N(0, 1 cm + 1% of the range), heading jitter
-                 N(0, 0.1 deg) per beam
+  noise          range noise N(0, 1 cm + 1% of the range; --noise-slope sets
+                 the 1%), heading jitter N(0, 0.1 deg) per beam
   people         1 to 10 discs of radius 0.2-0.3 m placed 0.6-6 m from the
                  sensor in free space, plus the noise above
   clutter        1 to 4 square boxes 0.3-1.0 m, 1-5 m away, plus the noise
@@ -254,6 +254,8 @@ def main():
     ap.add_argument("--range-max", type=float, default=30.0)
     ap.add_argument("--classes", default="static,noise,people,clutter,dropouts")
     ap.add_argument("--no-return", choices=("null", "max"), default="null")
+    ap.add_argument("--noise-slope", type=float, default=0.01,
+                    help="range noise grows by this share of the range (default 0.01: 1 cm + 1%%)")
     ap.add_argument("--unknown-blocks", action="store_true",
                     help="unknown cells stop beams (default: only occupied cells do)")
     a = ap.parse_args()
@@ -319,7 +321,7 @@ def main():
                     r = boxes_ranges(x, y, ang, r, boxes)
                 if cls != "static":
                     fin = np.isfinite(r)
-                    r[fin] += crng.normal(0.0, 1.0, fin.sum()) * (0.01 + 0.01 * r[fin])
+                    r[fin] += crng.normal(0.0, 1.0, fin.sum()) * (0.01 + a.noise_slope * r[fin])
                 if cls == "dropouts":
                     for _ in range(crng.integers(1, 5)):
                         s, ln = crng.integers(a.beams), crng.integers(5, 41)

@@ -508,6 +508,14 @@ pub const MIN_PREPARED_POINTS: usize = 8;
 /// "Sensor reach"; docs/results.md, "A sensor of short reach").
 pub const SHORT_REACH: f32 = 0.5;
 
+/// True when a sensor reaching `reach` m is short-range for a database
+/// whose reference scans reach `reference` m: under [`SHORT_REACH`] of
+/// it. The one test behind [`Localizer::short_reach`] (every early stop
+/// off) and `mapc localize`'s reference scans made for the scan's reach.
+pub fn is_short_reach(reach: f32, reference: f32) -> bool {
+    reach < SHORT_REACH * reference
+}
+
 /// Most candidates the background pass ([`Localizer::rank_background`])
 /// adds to a rejected scan's search. It runs only for scans whose first
 /// answer is rejected, which have usually examined every one of the first
@@ -869,7 +877,7 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// localizer then examines every candidate (no early stop), so the
     /// ambiguity test sees the look-alikes.
     pub fn short_reach(&self) -> bool {
-        self.scan.range_max < SHORT_REACH * self.params.sensor.range_max
+        is_short_reach(self.scan.range_max, self.params.sensor.range_max)
     }
 
     /// True when the answer among the first `examined` candidates, the best

@@ -2024,3 +2024,15 @@ fn a_short_reach_scan_examines_every_candidate() {
     // Every site (three) was matched: nothing stopped the search.
     assert_eq!(posed, db.site_count());
 }
+
+#[test]
+fn short_reach_is_under_half_the_reference_reach() {
+    use crate::localize::is_short_reach;
+    // A TurtleBot3-like 3.5 m sensor on a database of 30 m reference scans.
+    assert!(is_short_reach(3.5, 30.0));
+    // Half the reference reach is not short; the real logs' 30-80 m never are.
+    assert!(!is_short_reach(15.0, 30.0));
+    assert!(!is_short_reach(80.0, 30.0));
+    // A NaN reach is never short (the scan is rejected before that).
+    assert!(!is_short_reach(f32::NAN, 30.0));
+}

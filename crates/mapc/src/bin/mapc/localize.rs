@@ -628,7 +628,7 @@ impl Session {
     ) -> Result<String, CliError> {
         let reach = scan.data.range_max();
         let reference = map.db.params().sensor.range_max;
-        let short = reach < refloc::localize::SHORT_REACH * reference;
+        let short = refloc::localize::is_short_reach(reach, reference);
         if short {
             let t = &mut self.tally;
             t.shortest_reach = if t.short_reach == 0 {
