@@ -63,9 +63,13 @@ pub const EARLY_CONFIDENCE: f32 = 0.98;
 /// The confidence stop ([`EARLY_CONFIDENCE`]) waits for at least this many
 /// coarse candidates (examined or not): support, one of the confidence's
 /// features, counts the candidates that found the same pose, and needs a
-/// few to mean anything. 4 to 12 gave the same decisions in the replay; 6
-/// is the middle.
-pub const EARLY_CONFIDENCE_MIN: usize = 6;
+/// few to mean anything. 4 to 12 gave the same decisions in the replay; 6,
+/// the middle, was taken first. Since the sixteenth session 4, the low
+/// end: every decision on the three real logs, the independent simulator's
+/// 40 sets and `mapc eval`'s sets measured is the same as with 6, and the
+/// median real query takes 3-10% fewer instructions (docs/performance.md,
+/// "The low end of two waits").
+pub const EARLY_CONFIDENCE_MIN: usize = 4;
 
 /// The settled-answer stop: once the best answer so far has been the best
 /// over the last [`SETTLED_CANDIDATES`] examined candidates and has a
@@ -93,15 +97,17 @@ pub const SETTLED_CANDIDATES: usize = 20;
 /// 12 gave ACES's decisions of the settled stop alone but one, with a
 /// median of 20-23 candidates instead of 28, and on Intel two to four
 /// decisions changed (one to three more false accepts of 910, a
-/// tenth of a point each); 10 is the middle. CSAIL, held out: no decision
-/// changed. A single rule whose wait shrinks as the confidence grows (20
+/// tenth of a point each); 10, the middle, was taken first. CSAIL, held
+/// out: no decision changed. Since the sixteenth session 8, with
+/// [`EARLY_CONFIDENCE_MIN`] (the same decisions on every set measured;
+/// docs/performance.md, "The low end of two waits"). A single rule whose wait shrinks as the confidence grows (20
 /// candidates at 0.9 down to none at 0.98) examined fewer but added half a
 /// point of false accepts on ACES.
 pub const FIRM_CONFIDENCE: f32 = 0.95;
 
 /// How many examined candidates after the best one make an answer firm
 /// ([`FIRM_CONFIDENCE`]).
-pub const FIRM_CANDIDATES: usize = 10;
+pub const FIRM_CANDIDATES: usize = 8;
 
 /// True when the poses of `a` and `b` are distinct alternatives (see
 /// [`DISTINCT_DISTANCE`], [`DISTINCT_HEADING`]).
