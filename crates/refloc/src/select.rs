@@ -100,9 +100,9 @@ pub const SETTLED_CANDIDATES: usize = 20;
 /// tenth of a point each); 10, the middle, was taken first. CSAIL, held
 /// out: no decision changed. Since the sixteenth session 8, with
 /// [`EARLY_CONFIDENCE_MIN`] (the same decisions on every set measured;
-/// docs/performance.md, "The low end of two waits"). A single rule whose wait shrinks as the confidence grows (20
-/// candidates at 0.9 down to none at 0.98) examined fewer but added half a
-/// point of false accepts on ACES.
+/// docs/performance.md, "The low end of two waits"). A single rule whose
+/// wait shrinks as the confidence grows (20 candidates at 0.9 down to none
+/// at 0.98) examined fewer but added half a point of false accepts on ACES.
 pub const FIRM_CONFIDENCE: f32 = 0.95;
 
 /// How many examined candidates after the best one make an answer firm

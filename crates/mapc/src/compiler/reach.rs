@@ -134,9 +134,11 @@ pub fn derive_for_reach<D: AsRef<[u8]>>(
     Ok(sections)
 }
 
-/// The bytes of a `.refdb` holding `sections` (in memory, as
-/// [`crate::compiler::writer::write_refdb`] would write them).
-pub fn encode_sections(sections: &[(SectionKind, Vec<u8>)]) -> Vec<u8> {
+/// A `.refdb` holding `sections`, in memory (the bytes
+/// [`crate::compiler::writer::write_refdb`] would write) as a 4-byte
+/// aligned copy, which `refloc::RefDb` reads in place: the words and the
+/// length in bytes.
+pub fn encode_aligned(sections: &[(SectionKind, Vec<u8>)]) -> (Vec<u32>, usize) {
     let refs: Vec<(SectionKind, &[u8])> =
         sections.iter().map(|(k, b)| (*k, b.as_slice())).collect();
     let mut out = Vec::new();
@@ -144,7 +146,9 @@ pub fn encode_sections(sections: &[(SectionKind, Vec<u8>)]) -> Vec<u8> {
         out.extend_from_slice(b);
         Ok(())
     });
-    out
+    let mut words = vec![0u32; out.len().div_ceil(4)];
+    zerocopy::IntoBytes::as_mut_bytes(&mut words[..])[..out.len()].copy_from_slice(&out);
+    (words, out.len())
 }
 
 #[cfg(test)]

@@ -559,10 +559,7 @@ fn derive_db(db: &refloc::RefDb<DbBytes>, reach_m: f32) -> Result<refloc::RefDb<
     let fail = |e: String| format!("reference scans for a {reach_m:.1} m reach: {e}");
     let sections = mapc::compiler::reach::derive_for_reach(db, reach_m, true)
         .map_err(|e| fail(e.to_string()))?;
-    let bytes = mapc::compiler::reach::encode_sections(&sections);
-    let len = bytes.len();
-    let mut words = vec![0u32; len.div_ceil(4)];
-    zerocopy::IntoBytes::as_mut_bytes(&mut words[..])[..len].copy_from_slice(&bytes);
+    let (words, len) = mapc::compiler::reach::encode_aligned(&sections);
     refloc::RefDb::new(DbBytes::Owned { words, len }).map_err(|e| fail(e.to_string()))
 }
 

@@ -53,15 +53,6 @@ fn section_of(out: &BuildOutput, k: SectionKind) -> &[u8] {
     section(&out.sections, k)
 }
 
-/// The database `sections` make, as a 4-byte aligned copy (the reader
-/// needs aligned arrays) and its length in bytes.
-pub(crate) fn image(sections: &[(SectionKind, Vec<u8>)]) -> (Vec<u32>, usize) {
-    let bytes = crate::compiler::reach::encode_sections(sections);
-    let mut words = vec![0u32; bytes.len().div_ceil(4)];
-    zerocopy::IntoBytes::as_mut_bytes(&mut words[..])[..bytes.len()].copy_from_slice(&bytes);
-    (words, bytes.len())
-}
-
 #[test]
 fn db_size_is_the_bytes_of_the_sections_it_counts() {
     for features in [false, true] {
@@ -115,8 +106,8 @@ fn stored_features_are_the_runtimes_and_change_no_answer() {
             .collect::<Vec<_>>()
     };
     assert_eq!(others(&with), others(&without));
-    let (wa, la) = image(&with.sections);
-    let (wb, lb) = image(&without.sections);
+    let (wa, la) = crate::compiler::reach::encode_aligned(&with.sections);
+    let (wb, lb) = crate::compiler::reach::encode_aligned(&without.sections);
     let a = refloc::RefDb::new(&zerocopy::IntoBytes::as_bytes(&wa[..])[..la]).unwrap();
     let b = refloc::RefDb::new(&zerocopy::IntoBytes::as_bytes(&wb[..])[..lb]).unwrap();
     a.verify().unwrap();

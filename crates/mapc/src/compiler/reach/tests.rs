@@ -1,6 +1,6 @@
 use super::*;
 use crate::compiler::mapfile::MapSource;
-use crate::compiler::pipeline::tests::{image, section};
+use crate::compiler::pipeline::tests::section;
 use crate::compiler::pipeline::{build, BuildConfig};
 
 /// The pipeline tests' walled room with a pillar, 6 x 4 m at 0.1 m per
@@ -21,7 +21,7 @@ fn a_derived_reach_is_what_a_build_for_that_reach_stores() {
         },
     )
     .unwrap();
-    let (words, len) = image(&full.sections);
+    let (words, len) = encode_aligned(&full.sections);
     let db = RefDb::new(&zerocopy::IntoBytes::as_bytes(&words[..])[..len]).unwrap();
     let derived = derive_for_reach(&db, 2.5, false).unwrap();
     // The reach shortens the reference scans: some beams lose their return.
@@ -44,7 +44,7 @@ fn a_derived_reach_is_what_a_build_for_that_reach_stores() {
             k.name()
         );
     }
-    let (dw, dl) = image(&derived);
+    let (dw, dl) = encode_aligned(&derived);
     let d = RefDb::new(&zerocopy::IntoBytes::as_bytes(&dw[..])[..dl]).unwrap();
     d.verify().unwrap();
     let mut p = *d.params();
@@ -58,7 +58,7 @@ fn a_derived_reach_is_what_a_build_for_that_reach_stores() {
     assert_eq!(derive_for_reach(&db, 2.5, false).unwrap(), derived);
     // With the full search only the early stops' parameters change.
     let full = derive_for_reach(&db, 2.5, true).unwrap();
-    let (fw, fl) = image(&full);
+    let (fw, fl) = encode_aligned(&full);
     let f = RefDb::new(&zerocopy::IntoBytes::as_bytes(&fw[..])[..fl]).unwrap();
     let mut q = *f.params();
     assert_eq!((q.select.early_accept, q.select.early_min), (0.0, 0));
@@ -79,7 +79,7 @@ fn a_derived_reach_is_what_a_build_for_that_reach_stores() {
 fn a_reach_not_under_the_databases_own_is_refused() {
     let src = room();
     let full = build(&src, &BuildConfig::default()).unwrap();
-    let (words, len) = image(&full.sections);
+    let (words, len) = encode_aligned(&full.sections);
     let db = RefDb::new(&zerocopy::IntoBytes::as_bytes(&words[..])[..len]).unwrap();
     for r in [0.0, -1.0, f32::NAN, f32::INFINITY, 30.0, 45.0] {
         match derive_for_reach(&db, r, true) {
