@@ -586,6 +586,118 @@ pub fn slide(
     (c1 < c0).then_some(p1)
 }
 
+/// How far (m) [`corridor_search`] looks each way along a fit's weakest
+/// direction: most of a long corridor as a 180-degree scan sees it.
+pub const CORRIDOR_REACH: f32 = 6.0;
+/// The step (m) of [`corridor_search`]'s grid along the weakest direction.
+pub const CORRIDOR_STEP: f32 = 0.2;
+/// How far (m) the turned pose of [`corridor_search`] looks each way
+/// across the weakest direction: a pose turned end for end sits mirrored
+/// about the corridor's middle, up to a corridor's width away.
+pub const CORRIDOR_ACROSS: f32 = 1.5;
+/// The step (m) of the turned pose's grid across the weakest direction.
+pub const CORRIDOR_ACROSS_STEP: f32 = 0.3;
+/// [`corridor_search`] scores its grid on every this many points.
+pub const CORRIDOR_STRIDE: usize = 4;
+/// A grid pose's score in [`corridor_search`]: [`refine`]'s robust cost
+/// of every [`CORRIDOR_STRIDE`]th point, each distance capped at
+/// `max_dist` (m; a point off the map counts the cap). Lower is better.
+fn grid_score(dm: &DistMap<'_>, pts: &[[f32; 2]], pose: &Pose2, max_dist: f32) -> f32 {
+    let (s, c) = (libm::sinf(pose.theta), libm::cosf(pose.theta));
+    let c2 = ROBUST_SCALE * ROBUST_SCALE;
+    let mut far = 0u32;
+    let mut logs = LogProduct::new();
+    for p in pts.iter().step_by(CORRIDOR_STRIDE) {
+        if !p[0].is_finite() {
+            continue;
+        }
+        let m = [pose.x + c * p[0] - s * p[1], pose.y + s * p[0] + c * p[1]];
+        match dm.sample(m) {
+            Some((d, _)) if d < max_dist => logs.push(1.0 + d * d / c2),
+            _ => far += 1,
+        }
+    }
+    0.5 * c2 * (logs.ln() + far as f32 * libm::logf(1.0 + max_dist * max_dist / c2))
+}
+
+/// Two poses near a fitted sensor pose (map frame) that a scan matched
+/// along a corridor may have missed, each refined ([`refine`]) from the
+/// two best poses of its grid and kept only when its robust cost is below
+/// the pose's own: the best of a grid
+/// along the fit's weakest direction (a corridor's axis;
+/// [`CORRIDOR_REACH`] each way in steps of [`CORRIDOR_STEP`]) with the
+/// same heading; and with the heading turned end for end, first the best
+/// offset across that direction ([`CORRIDOR_ACROSS`] each way, a turned
+/// pose sits mirrored about the corridor's middle), then the best along
+/// it. A corridor's walls fit anywhere along it, and a scan matcher that
+/// pairs points by their neighbourhoods pairs a wall with itself shifted
+/// or turned: where people hide the door frames and ends that place a
+/// scan along it, the match lands metres off or backwards, beyond any
+/// refinement's reach (docs/results.md, "A corridor search in a
+/// crowd").
+pub fn corridor_search(
+    dm: &DistMap<'_>,
+    pts: &[[f32; 2]],
+    pose: Pose2,
+    iters: u32,
+    max_dist: f32,
+) -> [Option<Pose2>; 2] {
+    let (c0, ne) = cost_and_normal_equations(dm, pts, &pose, max_dist);
+    let Some(dir) = weak_direction(&ne) else {
+        return [None, None];
+    };
+    let across_dir = [-dir[1], dir[0]];
+    let at = |p: &Pose2, ta: f32, tb: f32| {
+        Pose2::new(
+            p.x + ta * dir[0] + tb * across_dir[0],
+            p.y + ta * dir[1] + tb * across_dir[1],
+            p.theta,
+        )
+    };
+    // The two grid poses of lowest score, best first: a grid pose half a
+    // step from the right one can score worse than one a feature's width
+    // off that fits half the features, so both are refined.
+    let best_two = |start: &Pose2, n: i32, step: f32, along: bool| {
+        let mut best = [(f32::INFINITY, *start); 2];
+        for k in -n..=n {
+            let t = k as f32 * step;
+            let p = if along {
+                at(start, t, 0.0)
+            } else {
+                at(start, 0.0, t)
+            };
+            let score = grid_score(dm, pts, &p, max_dist);
+            if score < best[0].0 {
+                best = [(score, p), best[0]];
+            } else if score < best[1].0 {
+                best[1] = (score, p);
+            }
+        }
+        [best[0].1, best[1].1]
+    };
+    let along = (CORRIDOR_REACH / CORRIDOR_STEP) as i32;
+    let across = (CORRIDOR_ACROSS / CORRIDOR_ACROSS_STEP) as i32;
+    let straight = best_two(&pose, along, CORRIDOR_STEP, true);
+    let turned = Pose2::new(
+        pose.x,
+        pose.y,
+        crate::frame::wrap_angle(pose.theta + core::f32::consts::PI),
+    );
+    let [turned, _] = best_two(&turned, across, CORRIDOR_ACROSS_STEP, false);
+    let turned = best_two(&turned, along, CORRIDOR_STEP, true);
+    [straight, turned].map(|starts| {
+        let mut best: Option<(f32, Pose2)> = None;
+        for start in starts {
+            let (p1, _, _) = refine_fit(dm, pts, start, iters, max_dist);
+            let c1 = cost_and_normal_equations(dm, pts, &p1, max_dist).0;
+            if c1 < c0 && best.is_none_or(|b| c1 < b.0) {
+                best = Some((c1, p1));
+            }
+        }
+        best.map(|b| b.1)
+    })
+}
+
 /// The robust cost ([`refine`]'s) of the points at `pose` with no skew,
 /// then [`refine_skew`] from there and the cost at its result: (skewed
 /// pose, skew (rad), rigid cost, skewed cost). The ratio of the two costs
@@ -827,19 +939,10 @@ mod tests {
         assert!(c.is_none_or(|c| c > 10.0 * r), "{c:?} vs {r}");
     }
 
-    /// A corridor 5 m long and 2 m wide at 0.05 m (100 x 40 cells), open
-    /// at both ends, with two pillars of 0.1 x 0.2 m standing on its walls
-    /// at x = 2.0 m (top) and x = 3.5 m (bottom): the only things that
-    /// place a scan along it. Encoded as the compiler does (the distance
-    /// between cell centres less half a cell, to the nearest wall cell).
-    fn corridor_with_pillars() -> Vec<u8> {
-        let (w, h) = (100i32, 40i32);
-        let wall = |x: i32, y: i32| {
-            y == 0
-                || y == h - 1
-                || ((40..=41).contains(&x) && y >= 35)
-                || ((70..=71).contains(&x) && y <= 4)
-        };
+    /// A `w` x `h` grid whose cells `wall` says are walls, encoded as the
+    /// compiler does: the distance between cell centres to the nearest wall
+    /// cell, less half a cell.
+    fn encode_walls(w: i32, h: i32, wall: impl Fn(i32, i32) -> bool) -> Vec<u8> {
         let cells: Vec<(i32, i32)> = (0..h)
             .flat_map(|y| (0..w).map(move |x| (x, y)))
             .filter(|&(x, y)| wall(x, y))
@@ -855,6 +958,22 @@ mod tests {
             }
         }
         out
+    }
+
+    /// A corridor 5 m long and 2 m wide at 0.05 m (100 x 40 cells), open
+    /// at both ends, with two pillars of 0.1 x 0.2 m standing on its walls
+    /// at x = 2.0 m (top) and x = 3.5 m (bottom): the only things that
+    /// place a scan along it. Encoded as the compiler does (the distance
+    /// between cell centres less half a cell, to the nearest wall cell).
+    fn corridor_with_pillars() -> Vec<u8> {
+        let (w, h) = (100i32, 40i32);
+        let wall = |x: i32, y: i32| {
+            y == 0
+                || y == h - 1
+                || ((40..=41).contains(&x) && y >= 35)
+                || ((70..=71).contains(&x) && y <= 4)
+        };
+        encode_walls(w, h, wall)
     }
 
     #[test]
@@ -908,6 +1027,73 @@ mod tests {
         assert!(
             super::slide(&dm, &pts, right, 10, 0.3).is_none_or(|p| (p.x - right.x).abs() < 0.02)
         );
+    }
+
+    /// A corridor 12 m long and 2 m wide at 0.05 m (240 x 40 cells), open
+    /// at both ends, with pillars of 0.3 x 0.2 m on its walls at x = 4.0 m
+    /// (top), 5.5 m (bottom) and 8.0 m (top), none of them mirrored by
+    /// another: the scan below fits one place along it, one way round.
+    /// Encoded as the compiler does.
+    fn long_corridor() -> Vec<u8> {
+        let (w, h) = (240i32, 40i32);
+        let pillar = |x: i32, at: i32| (at..=at + 5).contains(&x);
+        let wall = |x: i32, y: i32| {
+            y == 0
+                || y == h - 1
+                || ((pillar(x, 80) || pillar(x, 160)) && y >= 35)
+                || (pillar(x, 110) && y <= 4)
+        };
+        encode_walls(w, h, wall)
+    }
+
+    #[test]
+    fn a_match_metres_along_a_corridor_or_turned_end_for_end_is_found_again() {
+        let data = long_corridor();
+        let dm = DistMap::new(240, 40, &data, frame_05());
+        // The scan from (6.0, 0.7), heading 0.3 rad: the walls' inner faces
+        // (y = 0.05 and 1.95) from x = 2 to 10 m where no pillar stands,
+        // and the pillars' faces, in the sensor frame.
+        let truth = Pose2::new(6.0, 0.7, 0.3);
+        let mut map_pts = Vec::new();
+        let in_pillar = |x: f32, at: f32| (at - 0.05..=at + 0.35).contains(&x);
+        for k in 0..81 {
+            let x = 2.0 + 0.1 * k as f32;
+            if !(in_pillar(x, 4.0) || in_pillar(x, 8.0)) {
+                map_pts.push([x, 1.95]);
+            }
+            if !in_pillar(x, 5.5) {
+                map_pts.push([x, 0.05]);
+            }
+        }
+        for k in 0..5 {
+            let t = 0.05 * k as f32;
+            for at in [4.0f32, 8.0] {
+                map_pts.extend([[at, 1.75 + t], [at + 0.3, 1.75 + t]]);
+            }
+            map_pts.extend([[5.5, 0.05 + t], [5.8, 0.05 + t]]);
+        }
+        let inv = truth.inverse();
+        let pts: Vec<[f32; 2]> = map_pts.iter().map(|p| inv.apply(*p)).collect();
+        let near = |p: &Pose2| {
+            (p.x - truth.x).abs() < 0.03
+                && (p.y - truth.y).abs() < 0.03
+                && crate::wrap_angle(p.theta - truth.theta).abs() < 0.01
+        };
+        // Matched 2.6 m along the corridor: the refinement stays there.
+        let along = super::refine(&dm, &pts, Pose2::new(8.6, 0.72, 0.31), 10, 0.3).0;
+        assert!((along.x - truth.x).abs() > 2.0, "{along:?}");
+        let [straight, _] = super::corridor_search(&dm, &pts, along, 10, 0.3);
+        assert!(straight.is_some_and(|p| near(&p)), "{straight:?}");
+        // Turned end for end, mirrored about the corridor's middle (y =
+        // 1.0 m) and 1.5 m along: the same walls fit, the pillars do not.
+        let turned = Pose2::new(4.5, 1.3, 0.3 + core::f32::consts::PI);
+        let turned = super::refine(&dm, &pts, turned, 10, 0.3).0;
+        let [_, back] = super::corridor_search(&dm, &pts, turned, 10, 0.3);
+        assert!(back.is_some_and(|p| near(&p)), "{back:?}");
+        // At the right pose there is nothing better elsewhere to find.
+        let right = super::refine(&dm, &pts, truth, 10, 0.3).0;
+        let found = super::corridor_search(&dm, &pts, right, 10, 0.3);
+        assert!(found.iter().flatten().all(near), "{found:?}");
     }
 
     /// An 80 x 80 grid at 0.05 m with walls five cells thick all round:

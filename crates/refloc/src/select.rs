@@ -117,6 +117,55 @@ pub fn distinct(a: &Candidate, b: &Candidate) -> bool {
         || libm::fabsf(crate::wrap_angle(a.theta - b.theta)) > DISTINCT_HEADING
 }
 
+/// Where a pose found after the search ([`crate::Localizer::corridor_pass`])
+/// goes among the candidates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Placement {
+    /// A candidate at the same place ([`distinct`]) explains the scan at
+    /// least as well, or the pose would join places the candidates keep
+    /// apart: it adds nothing.
+    Known,
+    /// No candidate is at its place: a new hypothesis.
+    New,
+    /// A better fit of this candidate's place, whose pose it replaces.
+    Refits(usize),
+}
+
+/// Where `pose` (a candidate record with its pose and evidence) goes among
+/// `cands`: [`Placement::New`] when no candidate with a pose is at its
+/// place; [`Placement::Refits`] the one with the most evidence there (the
+/// earlier on a tie) when `pose` has more evidence than every candidate
+/// there and every other candidate is as distinct from `pose` as from it
+/// (a refit neither merges a rival into the answer nor lends support);
+/// else [`Placement::Known`].
+pub fn placement(cands: &[Candidate], pose: &Candidate) -> Placement {
+    let mut there: Option<usize> = None;
+    for (j, o) in cands.iter().enumerate() {
+        if o.has_pose == 0 || distinct(o, pose) {
+            continue;
+        }
+        if o.evidence >= pose.evidence {
+            return Placement::Known;
+        }
+        if there.is_none_or(|t| o.evidence > cands[t].evidence) {
+            there = Some(j);
+        }
+    }
+    let Some(j) = there else {
+        return Placement::New;
+    };
+    let old = &cands[j];
+    let same = cands
+        .iter()
+        .enumerate()
+        .all(|(k, o)| k == j || o.has_pose == 0 || distinct(o, old) == distinct(o, pose));
+    if same {
+        Placement::Refits(j)
+    } else {
+        Placement::Known
+    }
+}
+
 /// True when candidate `a` (with a pose) is a better answer than `b`: a
 /// pose that passes the free-space check beats one that fails it; then the
 /// larger matching score E ([`Selection::MatchScore`]) or evidence
@@ -303,6 +352,22 @@ impl Search {
     pub fn search_on(&mut self) {
         self.floor = None;
         self.confirmed = 0;
+    }
+
+    /// Finds the best candidate again among `cands` (every candidate so
+    /// far), after a pass changed or appended candidates outside the
+    /// search ([`crate::Localizer::corridor_pass`]).
+    pub fn reselect(&mut self, cands: &[Candidate]) {
+        self.best = None;
+        for (i, c) in cands.iter().enumerate() {
+            if c.has_pose != 0
+                && self
+                    .best
+                    .is_none_or(|b| better(c, &cands[b], self.selection))
+            {
+                self.best = Some(i);
+            }
+        }
     }
 
     /// The index of the best candidate recorded so far.
@@ -929,5 +994,60 @@ mod tests {
             s.record(&cands, 0.9);
             assert_eq!(s.stopping(), k == 2, "after {} candidates", k + 1);
         }
+    }
+
+    #[test]
+    fn a_pose_found_after_the_search_is_placed_without_merging_places() {
+        // Three places: the answer at the origin, a rival 1.8 m along the
+        // corridor, another 10 m away turned end for end.
+        let cands = [
+            cand(0.0, 0.0, 0.0, 60.0, 0),
+            cand(1.8, 0.0, 0.0, 55.0, 0),
+            Candidate {
+                has_pose: 0,
+                ..cand(20.0, 0.0, 0.0, 0.0, 0)
+            },
+            cand(10.0, 0.0, 3.1, 50.0, 0),
+        ];
+        // A new place (the candidate without a pose does not count).
+        let new = cand(20.0, 0.0, 0.0, 70.0, 0);
+        assert_eq!(placement(&cands, &new), Placement::New);
+        // A better fit of the rival's place: it replaces the rival's pose.
+        let refit = cand(2.2, 0.1, 0.05, 58.0, 0);
+        assert_eq!(placement(&cands, &refit), Placement::Refits(1));
+        // A fit of a place no better than the candidate there adds nothing.
+        let worse = cand(2.2, 0.1, 0.05, 55.0, 0);
+        assert_eq!(placement(&cands, &worse), Placement::Known);
+        // The other place turned back by more than 20 degrees is a new one.
+        let turned = cand(10.0, 0.0, 0.0, 52.0, 0);
+        assert_eq!(placement(&cands, &turned), Placement::New);
+        // A pose within 1 m of both the answer and the rival would merge
+        // two places the candidates keep apart, however well it fits.
+        let between = cand(0.9, 0.0, 0.0, 65.0, 0);
+        assert_eq!(placement(&cands, &between), Placement::Known);
+        // Between two candidates of one place, the one with more evidence
+        // is refitted.
+        let pair = [cand(0.0, 0.0, 0.0, 40.0, 0), cand(0.3, 0.0, 0.0, 45.0, 0)];
+        let better = cand(0.2, 0.0, 0.0, 50.0, 0);
+        assert_eq!(placement(&pair, &better), Placement::Refits(1));
+    }
+
+    #[test]
+    fn reselect_finds_the_best_among_changed_candidates() {
+        let p = params();
+        let mut s = Search::new(&p);
+        let mut cands = vec![cand(0.0, 0.0, 0.0, 60.0, 0)];
+        s.record(&cands, 0.9);
+        cands.push(cand(5.0, 0.0, 0.0, 50.0, 0));
+        s.record(&cands, 0.8);
+        assert_eq!(s.best(), Some(0));
+        // The second candidate refitted with more evidence, and a third
+        // appended that fails the free-space check with still more.
+        cands[1].evidence = 70.0;
+        let mut through = cand(9.0, 0.0, 0.0, 80.0, 0);
+        through.free_space_ok = 0;
+        cands.push(through);
+        s.reselect(&cands);
+        assert_eq!(s.best(), Some(1));
     }
 }
