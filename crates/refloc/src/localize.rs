@@ -1189,18 +1189,19 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
     /// rejected: around each of the [`CORRIDOR_CANDIDATES`] candidates
     /// with the most evidence (at least [`REFINE_GATE`] of its maximum),
     /// [`refine::corridor_search`] looks along the candidate's corridor and
-    /// turned end for end. Of the poses found that have more evidence than
-    /// their candidate, the one that gains most over the place it lands on
-    /// ([`select::placement`]) is kept: as a new candidate appended after
-    /// the others (a copy of the candidate it was found from, with the new
-    /// pose) when it is a new place, or as the better fit of the candidate
-    /// already there. Every other candidate stays as it was, so no rival
-    /// is merged away and no support is lent. In a crowd the door frames
+    /// turned end for end. The poses found that have more evidence than
+    /// their candidate are placed in order of their gain over the place
+    /// they land on, each by [`select::placement`] among the candidates as
+    /// the ones before it left them: as a new candidate appended after the
+    /// others (a copy of the candidate it was found from, with the new
+    /// pose) when it is a new place, as the better fit of the candidate
+    /// already there, or not at all. No other candidate changes, so no
+    /// rival is merged away and no support is lent. In a crowd the door frames
     /// and ends that place a scan along a corridor are hidden, and SSM
     /// lands metres along it or backwards from every site near the right
     /// pose, beyond the refinement's reach (docs/results.md, "A corridor
     /// search in a crowd"). Returns the number of candidates now examined
-    /// (`examined + 1` when one was appended).
+    /// (more than `examined` when some were appended).
     pub fn corridor_pass(&mut self, examined: usize) -> usize {
         let p = self.params;
         let nc = examined.min(self.nc);
@@ -1227,52 +1228,86 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         }
         let n = self.scan.beams;
         // (gain, candidate searched from, where it goes, robot pose, vicinity)
-        let mut best: Option<(f32, usize, Option<usize>, Pose2, verify::Vicinity)> = None;
+        // Every pose found with more evidence than its candidate, with its
+        // gain over the place it lands on, the candidate it was found from,
+        // its robot pose and its vicinity; at most two per candidate.
+        let mut all = [(
+            0.0f32,
+            0usize,
+            Pose2::default(),
+            verify::Vicinity::default(),
+        ); 2 * CORRIDOR_CANDIDATES];
+        let mut found = 0;
         for &i in &top[..count] {
             let c = self.b.cands[i];
             let sensor = Pose2::new(c.x, c.y, c.theta).compose(&p.sensor.offset);
-            let found = refine::corridor_search(
+            let poses = refine::corridor_search(
                 &self.dm,
                 &self.b.in_pts[..n],
                 sensor,
                 p.refine.refine_iters,
                 p.refine.refine_max_dist,
             );
-            for q in found.into_iter().flatten() {
+            for q in poses.into_iter().flatten() {
                 let Some((robot, v)) = self.improves(&c, &q, 0.0) else {
                     continue;
                 };
-                let evidence = v.evidence(p.verify.short_weight, p.verify.occlusion_fit);
-                let posed = Candidate {
-                    x: robot.x,
-                    y: robot.y,
-                    theta: robot.theta,
-                    evidence,
-                    ..c
-                };
-                let (slot, base) = match select::placement(&self.b.cands[..nc], &posed) {
+                let posed = self.posed(i, &robot, &v);
+                let base = match select::placement(&self.b.cands[..nc], &posed) {
                     Placement::Known => continue,
-                    Placement::New => (None, c.evidence),
-                    Placement::Refits(j) => (Some(j), self.b.cands[j].evidence),
+                    Placement::New => c.evidence,
+                    Placement::Refits(j) => self.b.cands[j].evidence,
                 };
-                let gain = evidence - base;
-                if best.as_ref().is_none_or(|b| gain > b.0) {
-                    best = Some((gain, i, slot, robot, v));
-                }
+                all[found] = (posed.evidence - base, i, robot, v);
+                found += 1;
             }
         }
-        let Some((_, i, slot, robot, v)) = best else {
-            return examined;
-        };
-        let spread = self.spread_at(&robot.compose(&p.sensor.offset));
-        if let Some(j) = slot {
-            self.b.cands[j] = placed(self.b.cands[j], &robot, &v, spread, p);
+        // Placed in order of gain (the earlier found on a tie), each among
+        // the candidates as the ones before it left them.
+        let all = &mut all[..found];
+        for k in 1..all.len() {
+            // Insertion sort, greatest gain first: stable, and few entries.
+            let mut j = k;
+            while j > 0 && all[j].0.total_cmp(&all[j - 1].0).is_gt() {
+                all.swap(j, j - 1);
+                j -= 1;
+            }
+        }
+        let mut total = nc;
+        for &(_, i, robot, v) in all.iter() {
+            let placement = select::placement(&self.b.cands[..total], &self.posed(i, &robot, &v));
+            let slot = match placement {
+                Placement::Known => continue,
+                Placement::Refits(j) => j,
+                Placement::New if total < self.b.cands.len() => total,
+                Placement::New => break,
+            };
+            let spread = self.spread_at(&robot.compose(&p.sensor.offset));
+            let from = if slot == total { i } else { slot };
+            self.b.cands[slot] = placed(self.b.cands[from], &robot, &v, spread, p);
+            if slot == total {
+                self.b.top[total] = self.b.top[i];
+                total += 1;
+            }
+        }
+        if total == nc {
             return examined;
         }
-        self.b.cands[nc] = placed(self.b.cands[i], &robot, &v, spread, p);
-        self.b.top[nc] = self.b.top[i];
-        self.nc = nc + 1;
-        nc + 1
+        self.nc = total;
+        total
+    }
+
+    /// Candidate `i`'s record at another robot pose with vicinity `v`: the
+    /// pose and its evidence, for [`select::placement`].
+    fn posed(&self, i: usize, robot: &Pose2, v: &verify::Vicinity) -> Candidate {
+        let p = self.params;
+        Candidate {
+            x: robot.x,
+            y: robot.y,
+            theta: robot.theta,
+            evidence: v.evidence(p.verify.short_weight, p.verify.occlusion_fit),
+            ..self.b.cands[i]
+        }
     }
 
     /// Records coarse candidate `c` (below N_C; others are ignored) as not
