@@ -16,6 +16,7 @@ use crate::db::RefDb;
 use crate::params::Params;
 use crate::prep;
 use crate::prior::Prior;
+use crate::rank;
 use crate::raycast::BitGrid;
 use crate::refine::{self, DistMap};
 use crate::select::{self, Next, Placement, Search};
@@ -476,6 +477,41 @@ pub const REFINE_GATE: f32 = 0.1;
 /// was allowed) and reported on the independent simulator's sets and the
 /// real logs (docs/results.md, "A corridor search in a crowd").
 pub const CORRIDOR_CANDIDATES: usize = 24;
+
+/// An entry of the corridor pass's best-first lists ([`rank::insert`]):
+/// a score (a candidate's evidence, or a found pose's gain), the key that
+/// breaks ties (lower first: the candidate's index, or the order found),
+/// the candidate searched from, and a found pose's robot pose and
+/// vicinity.
+#[derive(Clone, Copy, Default)]
+struct Scoring {
+    score: f32,
+    key: u32,
+    from: usize,
+    robot: Pose2,
+    v: verify::Vicinity,
+}
+
+impl Scoring {
+    fn new(score: f32, key: usize, from: usize, robot: Pose2, v: verify::Vicinity) -> Scoring {
+        Scoring {
+            score,
+            key: key as u32,
+            from,
+            robot,
+            v,
+        }
+    }
+}
+
+impl rank::Scored for Scoring {
+    fn score(&self) -> f32 {
+        self.score
+    }
+    fn key(&self) -> u32 {
+        self.key
+    }
+}
 
 /// In a crowded scan ([`Localizer::crowded`]) an SSM pose is also refined
 /// when its vicinity score M (which does not charge the beams that end short
@@ -1210,35 +1246,21 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
         }
         // The candidates to search around, most evidence first (the
         // earlier candidate on a tie).
-        let mut top = [usize::MAX; CORRIDOR_CANDIDATES];
+        let mut top = [Scoring::default(); CORRIDOR_CANDIDATES];
         let mut count = 0;
         for (i, c) in self.b.cands[..nc].iter().enumerate() {
-            if c.has_pose == 0 || verify::ratio(c.evidence, c.pairs) < REFINE_GATE {
-                continue;
-            }
-            let mut k = count;
-            while k > 0 && c.evidence > self.b.cands[top[k - 1]].evidence {
-                k -= 1;
-            }
-            if k < CORRIDOR_CANDIDATES {
-                count = (count + 1).min(CORRIDOR_CANDIDATES);
-                top.copy_within(k..count - 1, k + 1);
-                top[k] = i;
+            if c.has_pose != 0 && verify::ratio(c.evidence, c.pairs) >= REFINE_GATE {
+                let pick = Scoring::new(c.evidence, i, i, Pose2::default(), Default::default());
+                rank::insert(&mut top, &mut count, pick);
             }
         }
         let n = self.scan.beams;
-        // (gain, candidate searched from, where it goes, robot pose, vicinity)
         // Every pose found with more evidence than its candidate, with its
-        // gain over the place it lands on, the candidate it was found from,
-        // its robot pose and its vicinity; at most two per candidate.
-        let mut all = [(
-            0.0f32,
-            0usize,
-            Pose2::default(),
-            verify::Vicinity::default(),
-        ); 2 * CORRIDOR_CANDIDATES];
+        // gain over the place it lands on, greatest first (the earlier
+        // found on a tie); at most two per candidate.
+        let mut all = [Scoring::default(); 2 * CORRIDOR_CANDIDATES];
         let mut found = 0;
-        for &i in &top[..count] {
+        for &Scoring { from: i, .. } in &top[..count] {
             let c = self.b.cands[i];
             let sensor = Pose2::new(c.x, c.y, c.theta).compose(&p.sensor.offset);
             let poses = refine::corridor_search(
@@ -1258,33 +1280,25 @@ impl<'d, 's, D: AsRef<[u8]>> Localizer<'d, 's, D> {
                     Placement::New => c.evidence,
                     Placement::Refits(j) => self.b.cands[j].evidence,
                 };
-                all[found] = (posed.evidence - base, i, robot, v);
-                found += 1;
+                let pose = Scoring::new(posed.evidence - base, found, i, robot, v);
+                rank::insert(&mut all, &mut found, pose);
             }
         }
-        // Placed in order of gain (the earlier found on a tie), each among
-        // the candidates as the ones before it left them.
-        let all = &mut all[..found];
-        for k in 1..all.len() {
-            // Insertion sort, greatest gain first: stable, and few entries.
-            let mut j = k;
-            while j > 0 && all[j].0.total_cmp(&all[j - 1].0).is_gt() {
-                all.swap(j, j - 1);
-                j -= 1;
-            }
-        }
+        // Each placed among the candidates as the ones before it left them.
         let mut total = nc;
-        for &(_, i, robot, v) in all.iter() {
-            let placement = select::placement(&self.b.cands[..total], &self.posed(i, &robot, &v));
-            let slot = match placement {
-                Placement::Known => continue,
-                Placement::Refits(j) => j,
-                Placement::New if total < self.b.cands.len() => total,
-                Placement::New => break,
-            };
+        for &Scoring {
+            from: i, robot, v, ..
+        } in &all[..found]
+        {
+            let (slot, record) =
+                match select::placement(&self.b.cands[..total], &self.posed(i, &robot, &v)) {
+                    Placement::Known => continue,
+                    Placement::Refits(j) => (j, j),
+                    Placement::New if total < self.b.cands.len() => (total, i),
+                    Placement::New => break,
+                };
             let spread = self.spread_at(&robot.compose(&p.sensor.offset));
-            let from = if slot == total { i } else { slot };
-            self.b.cands[slot] = placed(self.b.cands[from], &robot, &v, spread, p);
+            self.b.cands[slot] = placed(self.b.cands[record], &robot, &v, spread, p);
             if slot == total {
                 self.b.top[total] = self.b.top[i];
                 total += 1;

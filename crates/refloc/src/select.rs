@@ -360,13 +360,20 @@ impl Search {
     pub fn reselect(&mut self, cands: &[Candidate]) {
         self.best = None;
         for (i, c) in cands.iter().enumerate() {
-            if c.has_pose != 0
-                && self
-                    .best
-                    .is_none_or(|b| better(c, &cands[b], self.selection))
-            {
-                self.best = Some(i);
+            if c.has_pose != 0 {
+                self.consider(cands, i);
             }
+        }
+    }
+
+    /// Makes candidate `c` of `cands` the best when it is a better answer
+    /// than the best so far ([`better`]).
+    fn consider(&mut self, cands: &[Candidate], c: usize) {
+        if self
+            .best
+            .is_none_or(|b| better(&cands[c], &cands[b], self.selection))
+        {
+            self.best = Some(c);
         }
     }
 
@@ -413,13 +420,8 @@ impl Search {
         let Some(c) = cands.len().checked_sub(1) else {
             return;
         };
+        self.consider(cands, c);
         let cand = &cands[c];
-        if self
-            .best
-            .is_none_or(|b| better(cand, &cands[b], self.selection))
-        {
-            self.best = Some(c);
-        }
         let best_ok = self.best.is_some_and(|b| passes(&cands[b]));
         let confident = explained_ratio(cand) >= self.early_accept
             && cand.short_beams * EARLY_SHORT_SHARE <= cand.pairs
