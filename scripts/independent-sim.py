@@ -42,7 +42,12 @@ Classes (each scan independently, from the same seed):
                  1 rad/s and drives at up to 0.5 m/s; the truth is the pose
                  at the first beam (the LaserScan stamp's convention), plus
                  the noise
-These three are not in the default --classes (added 2026-12-07).
+  cutshort       the paper's dynamic case as an outside simulator reads it:
+                 range noise N(0, 5 mm), and 60 of every 362 beams (the
+                 same share of other beam counts), drawn at random, cut
+                 short to a uniform fraction of their range
+These four are not in the default --classes (added 2026-12-07; cutshort
+2026-12-08).
 No-returns are written as JSON null (`--no-return null`, the default) or
 as the scan's range_max (`--no-return max`, as Stage and some drivers do).
 """
@@ -274,7 +279,7 @@ def main():
                 open(os.path.join(a.out, f"{cls}-truth.txt"), "w") as ft:
             for k, (x, y, th) in enumerate(poses):
                 ang = th + rel
-                if cls != "static":
+                if cls not in ("static", "cutshort"):
                     ang = ang + crng.normal(0.0, math.radians(0.1), a.beams)
                 if cls == "shifted":
                     # World = map moved by A(p) = s + k R (p - s) + t about
@@ -319,7 +324,12 @@ def main():
                         if p:
                             boxes.append((p[0] - s / 2, p[1] - s / 2, p[0] + s / 2, p[1] + s / 2))
                     r = boxes_ranges(x, y, ang, r, boxes)
-                if cls != "static":
+                if cls == "cutshort":
+                    fin = np.isfinite(r)
+                    r[fin] += crng.normal(0.0, 0.005, fin.sum())
+                    cut = crng.choice(a.beams, int(round(60 * a.beams / 362)), replace=False)
+                    r[cut] = np.where(np.isfinite(r[cut]), r[cut], a.range_max) * crng.uniform(0.0, 1.0, cut.size)
+                elif cls != "static":
                     fin = np.isfinite(r)
                     r[fin] += crng.normal(0.0, 1.0, fin.sum()) * (0.01 + a.noise_slope * r[fin])
                 if cls == "dropouts":

@@ -1321,6 +1321,86 @@ fn evidence_takes_a_share_of_a_hit_per_short_beam() {
     assert_eq!(hidden.evidence(1.0, 0.9), 45.0 - 4.5);
 }
 
+/// A `n x n` grid with its column `wall` occupied, at `res` m cells: its
+/// occupancy as [`crate::raycast::BitGrid`] words, its signed distance map
+/// (cell centre to the nearest cell of the other kind, less half a cell;
+/// negative inside the wall), and its frame.
+fn walled_grid(n: u32, wall: u32, res: f32) -> (Vec<u32>, Vec<u8>, MapFrame) {
+    let mut words = vec![0u32; crate::raycast::BitGrid::words_for(n, n)];
+    for cy in 0..n {
+        let i = (cy * n + wall) as usize;
+        words[i / 32] |= 1 << (i % 32);
+    }
+    let dist = (0..n * n)
+        .map(|i| {
+            // Only the wall column is occupied: the distance is across it.
+            let du = (i % n) as f32 - wall as f32;
+            let cells = if du == 0.0 {
+                -0.5
+            } else {
+                libm::fabsf(du) - 0.5
+            };
+            crate::format::dist_encode(cells)
+        })
+        .collect();
+    let frame = MapFrame {
+        resolution: res,
+        origin: Pose2::new(0.0, 0.0, 0.0),
+    };
+    (words, dist, frame)
+}
+
+#[test]
+fn on_a_coarse_map_a_grazing_beam_ending_inside_the_wall_cell_fits() {
+    use crate::verify::{coarse_reach, Verifier, REFERENCE_CELL};
+    assert_eq!(coarse_reach(REFERENCE_CELL), 0.0);
+    assert_eq!(coarse_reach(0.025), 0.0);
+    assert!((coarse_reach(0.1) - 0.4).abs() < 1e-6);
+    let (n, wall) = (120u32, 30u32);
+    // The sensor 5.5 cells before the wall's face; one beam `g` rad off the
+    // face, ending `past_face` m behind it (perpendicular).
+    let d_face = 5.5f32;
+    let beam = |res: f32, g: f32, past_face: f32| {
+        let (words, dist, frame) = walled_grid(n, wall, res);
+        let grid = crate::raycast::BitGrid::new(n, n, &words).unwrap();
+        let dm = crate::refine::DistMap::new(n, n, &dist, frame);
+        let verifier = Verifier {
+            grid: &grid,
+            frame,
+            dist: Some(dm),
+            open: Some(dm),
+            range_max: 30.0,
+            sigma_d: 0.05,
+            accept_ratio: 0.5,
+            through_excess: 0.5,
+            through_run: 3,
+        };
+        let sensor = Pose2::new((wall as f32 - d_face) * res, 3.5 * res, 0.0);
+        let dir = [libm::sinf(g), libm::cosf(g)];
+        let range = (d_face * res + past_face) / libm::sinf(g);
+        verifier.score_dirs(&sensor, core::iter::once((dir, range)))
+    };
+    let deg = |d: f32| d.to_radians();
+    // The surface in the middle of the wall's cells (a map of coarse cells
+    // marks the cell a surface runs through), met 10 degrees off: at 0.1 m
+    // cells the beam runs 0.29 m past the cast and fits by its end point.
+    let v = beam(0.1, deg(10.0), 0.05);
+    assert_eq!((v.long, v.short), (0, 0), "{v:?}");
+    assert!(v.score > 3.9, "{v:?}");
+    // The same 0.29 m past the cast on a map of 0.05 m cells (the surface
+    // at the back of the wall's cell): no reach there, a long beam.
+    let v = beam(0.05, deg(10.0), 0.05);
+    assert_eq!((v.long, v.score), (1, 0.0), "{v:?}");
+    // Within the reach (0.35 m past the face) but ending in the free space
+    // 0.2 m behind the wall: long.
+    let v = beam(0.1, deg(60.0), 0.3);
+    assert_eq!((v.long, v.score), (1, 0.0), "{v:?}");
+    // Ending in the wall's cell, but 0.57 m past the cast (5 degrees off):
+    // beyond the reach, long.
+    let v = beam(0.1, deg(5.0), 0.05);
+    assert_eq!((v.long, v.score), (1, 0.0), "{v:?}");
+}
+
 #[test]
 fn short_beams_of_a_person_before_a_fitting_wall_are_occluded() {
     let buf = tiny_db();
