@@ -129,6 +129,45 @@ fn build_verify_info_and_determinism() {
     assert!(text(&o).contains("identical"));
 }
 
+/// `mapc build` says when a map's cells are coarser than the 0.05 m the
+/// confidence model was fitted on (docs/robot.md, "Map cell size"), and
+/// only then: the demo map's image read as 0.1 m cells.
+#[test]
+fn build_notes_a_map_of_coarse_cells() {
+    let dir = tempfile::tempdir().unwrap();
+    let build = |yaml: &Path, out: &str, quiet: bool| {
+        let out = dir.path().join(out);
+        let mut args = vec!["build", yaml.to_str().unwrap(), "-o", out.to_str().unwrap()];
+        args.extend(["--fit-queries", "40"]);
+        if quiet {
+            args.push("-q");
+        }
+        let o = mapc(&args, dir.path());
+        assert!(o.status.success(), "{}", text(&o));
+        o
+    };
+    let fine = build(&demo_map(), "fine.refdb", false);
+    assert!(!text(&fine).contains("coarser than"), "{}", text(&fine));
+    let image = repo().join("maps/office-demo/office-demo.pgm");
+    let yaml = dir.path().join("coarse.yaml");
+    std::fs::write(
+        &yaml,
+        format!(
+            "image: {}\nresolution: 0.1\norigin: [0.0, 0.0, 0.0]\nnegate: 0\n\
+             occupied_thresh: 0.65\nfree_thresh: 0.196\n",
+            image.display()
+        ),
+    )
+    .unwrap();
+    let t = text(&build(&yaml, "coarse.refdb", false));
+    assert!(
+        t.contains("cells coarser than the 0.05 m") && t.contains("Map cell size"),
+        "{t}"
+    );
+    // Quiet is quiet.
+    assert!(build(&yaml, "quiet.refdb", true).stderr.is_empty());
+}
+
 #[test]
 fn diff_reports_changes() {
     let dir = tempfile::tempdir().unwrap();

@@ -358,6 +358,15 @@ pub fn run(a: Args, ui: &Ui) -> CliResult {
             g.width as f64 * res,
             g.height as f64 * res
         );
+        if res as f32 > refloc::verify::REFERENCE_CELL * 1.01 {
+            eprintln!(
+                "  note           cells coarser than the {} m the confidence model was fitted on: \
+                 expect fewer scans accepted (docs/robot.md, \"Map cell size\"); \
+                 save the map at {} m if you can",
+                refloc::verify::REFERENCE_CELL,
+                refloc::verify::REFERENCE_CELL
+            );
+        }
         eprintln!(
             "  free area      {:.1} m^2 ({} cells)",
             free as f64 * res * res,
