@@ -873,7 +873,7 @@ fn solve3(h: &[[f32; 3]; 3], g: &[f32; 3]) -> Option<[f32; 3]> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::{floor_i64, position_spread, DistMap};
     use crate::format::dist_encode;
     use crate::{MapFrame, Pose2};
@@ -942,7 +942,7 @@ mod tests {
     /// A `w` x `h` grid whose cells `wall` says are walls, encoded as the
     /// compiler does: the distance between cell centres to the nearest wall
     /// cell, less half a cell.
-    fn encode_walls(w: i32, h: i32, wall: impl Fn(i32, i32) -> bool) -> Vec<u8> {
+    pub(crate) fn encode_walls(w: i32, h: i32, wall: impl Fn(i32, i32) -> bool) -> Vec<u8> {
         let cells: Vec<(i32, i32)> = (0..h)
             .flat_map(|y| (0..w).map(move |x| (x, y)))
             .filter(|&(x, y)| wall(x, y))

@@ -1322,27 +1322,16 @@ fn evidence_takes_a_share_of_a_hit_per_short_beam() {
 }
 
 /// A `n x n` grid with its column `wall` occupied, at `res` m cells: its
-/// occupancy as [`crate::raycast::BitGrid`] words, its signed distance map
-/// (cell centre to the nearest cell of the other kind, less half a cell;
-/// negative inside the wall), and its frame.
+/// occupancy as [`crate::raycast::BitGrid`] words, its distance map as the
+/// compiler encodes it ([`crate::refine::tests::encode_walls`]), and its
+/// frame.
 fn walled_grid(n: u32, wall: u32, res: f32) -> (Vec<u32>, Vec<u8>, MapFrame) {
     let mut words = vec![0u32; crate::raycast::BitGrid::words_for(n, n)];
     for cy in 0..n {
         let i = (cy * n + wall) as usize;
         words[i / 32] |= 1 << (i % 32);
     }
-    let dist = (0..n * n)
-        .map(|i| {
-            // Only the wall column is occupied: the distance is across it.
-            let du = (i % n) as f32 - wall as f32;
-            let cells = if du == 0.0 {
-                -0.5
-            } else {
-                libm::fabsf(du) - 0.5
-            };
-            crate::format::dist_encode(cells)
-        })
-        .collect();
+    let dist = crate::refine::tests::encode_walls(n as i32, n as i32, |x, _| x == wall as i32);
     let frame = MapFrame {
         resolution: res,
         origin: Pose2::new(0.0, 0.0, 0.0),
